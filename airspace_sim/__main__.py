@@ -1,0 +1,5 @@
+import sys
+
+from airspace_sim.cli import main
+
+sys.exit(main())

@@ -1,0 +1,66 @@
+"""The ``airspace-sim`` command line.
+
+Each subcommand is a module in :mod:`airspace_sim.commands` exposing ``HELP`` (one line),
+``add_arguments(parser)`` and ``run(args) -> int``. Modules import their heavy dependencies
+inside ``run`` so that ``airspace-sim --help`` stays fast.
+
+A :class:`~airspace_sim.errors.UserError` raised anywhere becomes one line on stderr and
+exit status 2, with no traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import pkgutil
+import sys
+
+from airspace_sim.errors import UserError
+
+# Order in which subcommands are listed by --help; any other module found is appended.
+_ORDER = ["run", "encounters", "figures", "bench"]
+
+
+def _command_modules() -> dict:
+    import airspace_sim.commands as pkg
+
+    names = [m.name for m in pkgutil.iter_modules(pkg.__path__) if not m.name.startswith("_")]
+    names.sort(key=lambda n: (_ORDER.index(n) if n in _ORDER else len(_ORDER), n))
+    return {n: importlib.import_module(f"airspace_sim.commands.{n}") for n in names}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from airspace_sim import __version__
+
+    parser = argparse.ArgumentParser(
+        prog="airspace-sim",
+        description="2D multi-aircraft airspace simulator with IMM tracking and "
+        "conflict detection and avoidance.",
+    )
+    parser.add_argument("--version", action="version", version=f"airspace-sim {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name, mod in _command_modules().items():
+        p = sub.add_parser(name, help=mod.HELP, description=mod.HELP)
+        mod.add_arguments(p)
+        p.set_defaults(_run=mod.run)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "_run", None):
+        parser.print_help()
+        return 0
+    try:
+        return int(args._run(args) or 0)
+    except UserError as exc:
+        print(f"airspace-sim {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"airspace-sim {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
