@@ -1,0 +1,104 @@
+"""What a scenario is: typed, validated sections, as loaded from a TOML file.
+
+Every field has a unit in its name or docstring (metres, seconds, degrees only where the
+name says ``_deg``). :mod:`airspace_sim.scenarios.loader` turns a TOML table into these
+dataclasses and rejects unknown keys, wrong types and out-of-range values with one line
+naming file, key and value. The world (:mod:`airspace_sim.world`) consumes a
+:class:`Scenario` and never reads TOML itself.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+
+@dataclass
+class Separation:
+    """Separation standards."""
+
+    r_safe: float = 3000.0  #: protected-zone radius in metres (loss of separation inside)
+    nmac: float = 152.4  #: near mid-air collision distance in metres (500 ft)
+
+
+@dataclass
+class SensorSpec:
+    """How every ownship observes intruders."""
+
+    kind: str = "radar"  #: registry name of the sensor
+    range: float = 40000.0  #: surveillance range in metres
+    sigma: float = 50.0  #: position noise standard deviation per axis in metres (R = σ² I)
+    detection_probability: float = 1.0  #: probability a target in range is reported per scan
+    period: float = 1.0  #: seconds between scans (a multiple of the world's dt)
+    drop_after_misses: int = 5  #: consecutive missed scans after which a track is dropped
+
+
+@dataclass
+class TrackerSpec:
+    """The tracker each ownship runs for every intruder in range."""
+
+    kind: str = "imm"  #: registry name of the tracker ("imm", or a plugin such as "kalman")
+    model: str = "realistic"  #: dynamics preset the tracker's mode filters use
+
+
+@dataclass
+class ResolverSpec:
+    """Conflict detection and avoidance."""
+
+    kind: str = "bands"  #: registry name: "none", "seed", "bands", ...
+    lookahead: float = 120.0  #: look-ahead in seconds
+    margin: float = 0.1  #: extra fraction of r_safe kept clear
+    params: dict = field(default_factory=dict)  #: extra keyword arguments for the resolver
+
+
+@dataclass
+class AircraftSpec:
+    """One aircraft placed by hand."""
+
+    id: str
+    position: tuple[float, float]  #: metres, east and north
+    heading_deg: float  #: degrees, counter-clockwise from east
+    speed: float  #: ground speed in m/s
+    autopilot: str = "straight"  #: registry name: "straight", "markov", "route"
+    waypoints: list[tuple[float, float]] = field(default_factory=list)  #: metres, for "route"
+    controlled: bool = False  #: an RL agent in the PettingZoo env
+    max_turn_rate_deg: float = 3.0  #: turn-rate limit in degrees per second
+    avoid: bool = True  #: runs the resolver (background traffic may be non-cooperative)
+
+
+@dataclass
+class TrafficSpec:
+    """Generated traffic added to the hand-placed aircraft."""
+
+    pattern: str = "none"  #: "none", "ring" (converging on the centre) or "random" (square sector)
+    count: int = 0  #: number of generated aircraft
+    radius: float = 20000.0  #: ring radius in metres ("ring")
+    sector: float = 60000.0  #: side of the square sector in metres ("random")
+    speed: float = 230.0  #: ground speed in m/s
+    speed_spread: float = 0.0  #: generated speeds uniform in speed ± speed_spread, m/s
+    autopilot: str = "route"  #: autopilot of generated aircraft
+    max_turn_rate_deg: float = 3.0  #: turn-rate limit in degrees per second
+    controlled: int = 0  #: how many generated aircraft are RL agents (the first ones)
+
+
+@dataclass
+class Scenario:
+    """A whole scenario. ``source`` is the file it came from (for error messages)."""
+
+    name: str
+    description: str = ""
+    seed: int = 0
+    dt: float = 1.0  #: world step in seconds
+    duration: float = 600.0  #: seconds of simulated time
+    model: str = "realistic"  #: dynamics preset for Markov autopilots
+    separation: Separation = field(default_factory=Separation)
+    sensor: SensorSpec = field(default_factory=SensorSpec)
+    tracker: TrackerSpec = field(default_factory=TrackerSpec)
+    resolver: ResolverSpec = field(default_factory=ResolverSpec)
+    traffic: TrafficSpec = field(default_factory=TrafficSpec)
+    aircraft: list[AircraftSpec] = field(default_factory=list)
+    source: str = "<memory>"
+
+    @property
+    def n_steps(self) -> int:
+        """Number of world steps in ``duration``."""
+        return int(round(self.duration / self.dt))
