@@ -19,7 +19,10 @@ def validate_transition_matrix(Pi, name: str = "transition_matrix", atol: float 
 
     Raises :class:`UserError` naming ``name``, the offending row and its value.
     """
-    P = np.asarray(Pi, dtype=float)
+    try:
+        P = np.array(Pi, dtype=float)
+    except (TypeError, ValueError):
+        raise UserError(f"{name}: must be a square (M, M) matrix of numbers, got {Pi!r}") from None
     if P.ndim != 2 or P.shape[0] != P.shape[1] or P.shape[0] == 0:
         raise UserError(f"{name}: must be a square (M, M) matrix, got shape {P.shape}")
     if not np.all(np.isfinite(P)):
@@ -70,7 +73,7 @@ def generator_from_sojourn(sojourn_s, switch_probabilities=None) -> np.ndarray:
 
 def transition_matrix_from_sojourn(sojourn_s, dt: float, switch_probabilities=None) -> np.ndarray:
     """Per-step ``Π(ΔT) = expm(Λ ΔT)`` (M, M) for mean sojourn times in seconds."""
-    if not (np.isfinite(dt) and dt > 0):
+    if not (isinstance(dt, (int, float, np.floating, np.integer)) and np.isfinite(dt) and dt > 0):
         raise UserError(f"dt: must be a positive number of seconds, got {dt!r}")
     Pi = expm(generator_from_sojourn(sojourn_s, switch_probabilities) * dt)
     Pi = np.clip(Pi, 0.0, None)

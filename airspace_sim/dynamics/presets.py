@@ -30,6 +30,7 @@ class Preset:
 
     Attributes
     ----------
+    dt : time step ΔT in seconds.
     turn_rates : per-mode turn rate ω_q in rad/s, counter-clockwise positive, shape (M,).
     transition_matrix : Π, (M, M), row i = Pr(next mode | mode i), per step of ``dt``.
     process_noise : Q used by the truth generator, (5, 5), added each step.
@@ -39,6 +40,18 @@ class Preset:
     pin_turn_rate : if true, each mode filter sets Ω to its own mode's rate every step
         (transition row of Ω zeroed, offset ω_q), so the combined Ω estimate is the
         mode-weighted turn rate; if false Ω is carried as a random walk.
+    initial_mode_probabilities : (M,) or None for the chain's stationary law.
+    sojourn_s, switch_probabilities : optional continuous-time mode chain (mean sojourn
+        times in seconds, where a mode goes when it leaves). When given, the per-step
+        ``transition_matrix`` is ``expm(Λ dt)`` and :meth:`with_` rebuilds it when ``dt``
+        changes, so the aircraft behave the same in seconds whatever the step.
+    sigma_accel, filter_sigma_accel : optional white-noise-acceleration σ_a (m/s²) of the
+        truth and of the filters; when given, :meth:`with_` rebuilds ``process_noise`` /
+        ``filter_process_noise`` for a new ``dt``. ``sigma_turn_rate`` (rad/s per step) is
+        their Ω entry.
+
+    Presets without the continuous-time fields (``seed``) hold per-step numbers, as the
+    paper does: changing ``dt`` alone keeps Π and Q per step.
     """
 
     name: str
@@ -51,6 +64,50 @@ class Preset:
     speed_range: tuple = (V_CRUISE, 2 * V_CRUISE)
     pin_turn_rate: bool = True
     initial_mode_probabilities: tuple = field(default=None)
+    sojourn_s: tuple = None
+    switch_probabilities: tuple = None
+    sigma_accel: float = None
+    filter_sigma_accel: float = None
+    sigma_turn_rate: float = 0.0
+
+    def __post_init__(self):
+        where = f"preset {self.name!r}"
+        set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
+        dt = float(self.dt)
+        if not (math.isfinite(dt) and dt > 0):
+            raise UserError(f"{where}: dt must be a positive number of seconds, got {self.dt!r}")
+        set_("dt", dt)
+        rates = np.asarray(self.turn_rates, dtype=float).reshape(-1)
+        if rates.size == 0 or not np.all(np.isfinite(rates)):
+            raise UserError(f"{where}: turn_rates must be finite rad/s, got {rates.tolist()}")
+        set_("turn_rates", tuple(rates.tolist()))
+        M = rates.size
+        Pi = markov.validate_transition_matrix(self.transition_matrix, f"{where}: transition_matrix")
+        if Pi.shape != (M, M):
+            raise UserError(f"{where}: transition_matrix is {Pi.shape}, expected ({M}, {M})")
+        set_("transition_matrix", _tup(Pi))
+        for key in ("process_noise", "filter_process_noise"):
+            set_(key, _tup(_check_covariance(getattr(self, key), f"{where}: {key}")))
+        sigma = float(self.measurement_sigma)
+        if not (math.isfinite(sigma) and sigma > 0):
+            raise UserError(f"{where}: measurement_sigma must be positive metres, got {sigma!r}")
+        set_("measurement_sigma", sigma)
+        lo, hi = (float(v) for v in self.speed_range)
+        if not (0 <= lo <= hi < math.inf):
+            raise UserError(f"{where}: speed_range must be 0 <= low <= high m/s, got {self.speed_range!r}")
+        set_("speed_range", (lo, hi))
+        if self.initial_mode_probabilities is not None:
+            mu = np.asarray(self.initial_mode_probabilities, dtype=float).reshape(-1)
+            if mu.shape != (M,) or np.any(~np.isfinite(mu) | (mu < 0)) or abs(mu.sum() - 1) > 1e-9:
+                raise UserError(
+                    f"{where}: initial_mode_probabilities must be {M} non-negative numbers "
+                    f"summing to 1, got {mu.tolist()}"
+                )
+            set_("initial_mode_probabilities", tuple(mu.tolist()))
+        if self.sojourn_s is not None:
+            set_("sojourn_s", tuple(np.asarray(self.sojourn_s, dtype=float).reshape(-1).tolist()))
+        if self.switch_probabilities is not None:
+            set_("switch_probabilities", _tup(self.switch_probabilities))
 
     @property
     def n_modes(self) -> int:
@@ -71,12 +128,19 @@ class Preset:
         return u
 
     def mu0(self) -> np.ndarray:
-        """Initial mode probabilities (M,): the given ones, else the chain's stationary law."""
+        """Initial mode probabilities (M,): the given ones, else the chain's stationary law.
+
+        The stationary law solves ``p Π = p``, ``Σ p = 1`` (least squares, so a chain with
+        several closed classes still gets an answer); round-off negatives are clipped.
+        """
         if self.initial_mode_probabilities is not None:
             return np.asarray(self.initial_mode_probabilities, dtype=float)
-        Pi = np.asarray(self.transition_matrix)
-        w, v = np.linalg.eig(Pi.T)
-        p = np.real(v[:, np.argmin(np.abs(w - 1.0))])
+        Pi = np.asarray(self.transition_matrix, dtype=float)
+        M = Pi.shape[0]
+        A = np.vstack([Pi.T - np.eye(M), np.ones((1, M))])
+        b = np.zeros(M + 1)
+        b[-1] = 1.0
+        p = np.clip(np.linalg.lstsq(A, b, rcond=None)[0], 0.0, None)
         return p / p.sum()
 
     def imm_arguments(self) -> dict:
@@ -93,12 +157,52 @@ class Preset:
         )
 
     def with_(self, **changes) -> "Preset":
-        """A copy with some fields changed (e.g. ``preset.with_(dt=0.5)``)."""
-        return replace(self, **changes)
+        """A copy with some fields changed (e.g. ``preset.with_(dt=0.5)``).
+
+        Per-step numbers that come from continuous-time fields are rebuilt for the new
+        values: Π from ``sojourn_s`` (if set) and Q from ``sigma_accel`` /
+        ``filter_sigma_accel`` (if set), unless the change gives them explicitly. Giving a
+        per-step Π or Q explicitly drops the continuous-time field it came from, so a later
+        ``dt`` change keeps it per step.
+        """
+        changes = dict(changes)
+        if "transition_matrix" in changes and "sojourn_s" not in changes:
+            changes["sojourn_s"] = None
+        if "process_noise" in changes and "sigma_accel" not in changes:
+            changes["sigma_accel"] = None
+        if "filter_process_noise" in changes and "filter_sigma_accel" not in changes:
+            changes["filter_sigma_accel"] = None
+        new = replace(self, **changes)
+        derived = {}
+        touched = set(changes)
+        if new.sojourn_s is not None and "transition_matrix" not in changes and touched & {
+            "dt", "sojourn_s", "switch_probabilities"
+        }:
+            derived["transition_matrix"] = _tup(
+                markov.transition_matrix_from_sojourn(new.sojourn_s, new.dt, new.switch_probabilities)
+            )
+        for q_key, s_key in (("process_noise", "sigma_accel"), ("filter_process_noise", "filter_sigma_accel")):
+            sig = getattr(new, s_key)
+            if sig is not None and q_key not in changes and touched & {"dt", s_key, "sigma_turn_rate"}:
+                derived[q_key] = _tup(models.white_noise_acceleration(sig, new.dt, new.sigma_turn_rate))
+        return replace(new, **derived) if derived else new
+
+
+def _check_covariance(Q, name: str) -> np.ndarray:
+    Q = np.asarray(Q, dtype=float)
+    if Q.shape != (models.N_STATE, models.N_STATE) or not np.all(np.isfinite(Q)):
+        raise UserError(f"{name}: must be a finite (5, 5) covariance, got shape {Q.shape}")
+    if not np.allclose(Q, Q.T, rtol=1e-9, atol=1e-12):
+        raise UserError(f"{name}: must be symmetric")
+    w = np.linalg.eigvalsh(Q)
+    if w.min() < -1e-9 * max(1.0, abs(w).max()):
+        raise UserError(f"{name}: must be positive semi-definite (smallest eigenvalue {w.min():.3g})")
+    return Q
 
 
 def _tup(a) -> tuple:
-    return tuple(map(tuple, np.asarray(a, dtype=float)))
+    """A 2-d array as a tuple of tuples of Python floats (hashable, comparable with ==)."""
+    return tuple(map(tuple, np.asarray(a, dtype=float).tolist()))
 
 
 def seed() -> Preset:
@@ -123,30 +227,43 @@ def realistic(dt: float = 1.0) -> Preset:
 
     Truth uses white-noise acceleration σ_a = 0.5 m/s²; the matched filters use
     σ_a = 1.0 m/s² (a slightly inflated Q, as a tracking engineer tunes it).
+    Mode chain and Q are given in continuous time, so ``with_(dt=...)`` (or
+    ``get("realistic", dt=...)``) keeps the behaviour in seconds.
     """
     omega = math.radians(3.0)
     # Leaving a turn goes back to straight flight; leaving straight flight turns either way.
     switch = [[0, 0.5, 0.5], [1, 0, 0], [1, 0, 0]]
-    Pi = markov.transition_matrix_from_sojourn([60.0, 20.0, 20.0], dt, switch)
+    sojourn = (60.0, 20.0, 20.0)
+    sigma_turn_rate = 1e-4
     return Preset(
         name="realistic",
         dt=dt,
         turn_rates=(0.0, omega, -omega),
-        transition_matrix=_tup(Pi),
-        process_noise=_tup(models.white_noise_acceleration(0.5, dt, 1e-4)),
-        filter_process_noise=_tup(models.white_noise_acceleration(1.0, dt, 1e-4)),
+        transition_matrix=_tup(markov.transition_matrix_from_sojourn(sojourn, dt, switch)),
+        process_noise=_tup(models.white_noise_acceleration(0.5, dt, sigma_turn_rate)),
+        filter_process_noise=_tup(models.white_noise_acceleration(1.0, dt, sigma_turn_rate)),
         measurement_sigma=50.0,
         speed_range=(200.0, 260.0),
         initial_mode_probabilities=None,
+        sojourn_s=sojourn,
+        switch_probabilities=_tup(switch),
+        sigma_accel=0.5,
+        filter_sigma_accel=1.0,
+        sigma_turn_rate=sigma_turn_rate,
     )
 
 
 PRESETS = {"seed": seed, "realistic": realistic}
 
 
-def get(name: str) -> Preset:
-    """The preset called ``name``; a :class:`UserError` listing the known names if unknown."""
+def get(name: str, dt: float | None = None) -> Preset:
+    """The preset called ``name``; a :class:`UserError` listing the known names if unknown.
+
+    ``dt`` (seconds), if given, changes the step via :meth:`Preset.with_` (continuous-time
+    presets keep their behaviour in seconds; the ``seed`` preset's numbers stay per step).
+    """
     try:
-        return PRESETS[name]()
+        preset = PRESETS[name]()
     except KeyError:
         raise UserError(f"unknown preset {name!r} (known: {', '.join(sorted(PRESETS))})") from None
+    return preset if dt is None else preset.with_(dt=dt)

@@ -17,6 +17,7 @@ import numpy as np
 
 from airspace_sim.dynamics import models
 from airspace_sim.dynamics.presets import Preset
+from airspace_sim.errors import UserError
 
 
 @dataclass
@@ -46,10 +47,19 @@ def noise_factor(Q: np.ndarray) -> np.ndarray:
 
 
 def sample_modes(Pi: np.ndarray, previous: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """Next modes (B,) given previous modes (B,) and Π (M, M), one uniform draw per target."""
-    cdf = np.cumsum(Pi, axis=1)[previous]  # (B, M)
+    """Next modes (B,) given previous modes (B,) and Π (M, M), one uniform draw per target.
+
+    Inverse-CDF sampling: with ``u ~ U[0, 1)`` the next mode is the number of cumulative
+    probabilities ``≤ u``. Each row's CDF is divided by its last entry so that it ends at
+    exactly 1: a mode with zero probability (including trailing ones, where rounding of the
+    cumulative sum could leave the CDF just below 1) is never drawn.
+    """
+    Pi = np.asarray(Pi, dtype=float)
+    previous = np.asarray(previous)
+    cdf = np.cumsum(Pi, axis=1)
+    cdf /= cdf[:, -1:]
     u = rng.random(previous.shape)
-    return np.minimum((u[:, None] > cdf).sum(axis=1), Pi.shape[0] - 1)
+    return (u[..., None] >= cdf[previous]).sum(axis=-1)
 
 
 def initial_states(preset: Preset, n_targets: int, rng: np.random.Generator) -> np.ndarray:
@@ -78,11 +88,20 @@ def simulate(
     n_steps : T, number of time steps including the initial one.
     n_targets : B.
     rng : source of randomness (default ``np.random.default_rng(0)``).
-    x0 : (B, 5) initial states; default :func:`initial_states`.
+    x0 : (B, 5) initial states; default :func:`initial_states`. Their Ω is replaced by
+        the initial mode's turn rate (Ω is the mode's rate, not a free state).
     mode0 : (B,) initial modes; default drawn from ``preset.mu0()``.
     """
     rng = np.random.default_rng(0) if rng is None else rng
-    B, T = n_targets, n_steps
+    B, T = int(n_targets), int(n_steps)
+    if T < 1 or B < 1:
+        raise UserError(f"simulate: n_steps and n_targets must be >= 1, got {n_steps}, {n_targets}")
+    if x0 is not None and np.shape(x0) != (B, models.N_STATE):
+        raise UserError(f"simulate: x0 must have shape ({B}, {models.N_STATE}), got {np.shape(x0)}")
+    if mode0 is not None:
+        m0 = np.asarray(mode0)
+        if m0.shape != (B,) or np.any((m0 < 0) | (m0 >= preset.n_modes)):
+            raise UserError(f"simulate: mode0 must be {B} mode indices in [0, {preset.n_modes})")
     Pi = np.asarray(preset.transition_matrix, dtype=float)
     F = models.transition(np.asarray(preset.turn_rates), preset.dt)  # (M, 5, 5)
     rates = np.asarray(preset.turn_rates, dtype=float)
@@ -92,7 +111,7 @@ def simulate(
     states = np.empty((T, B, models.N_STATE))
     modes = np.empty((T, B), dtype=np.int64)
     x = initial_states(preset, B, rng) if x0 is None else np.array(x0, dtype=float)
-    q = rng.choice(len(rates), size=B, p=preset.mu0()) if mode0 is None else np.asarray(mode0)
+    q = rng.choice(len(rates), size=B, p=preset.mu0()) if mode0 is None else np.asarray(mode0, dtype=np.int64)
     x[:, models.TURN_RATE] = rates[q]
     states[0], modes[0] = x, q
     for k in range(1, T):
