@@ -1,0 +1,403 @@
+"""Batched Interacting Multiple Model (IMM) estimator (paper §IV).
+
+One :class:`IMM` object tracks ``B`` independent targets with the same jump-Markov model:
+``M`` linear-Gaussian modes ``x(k) = F_j x(k−1) + u_j + w_j``, ``w_j ~ N(0, Q_j)``, a mode
+chain with row-stochastic ``Π`` (``Π[i, j] = Pr(next mode j | mode i)``) and linear
+measurements ``z = H x + v``, ``v ~ N(0, R)``. Each :meth:`IMM.step` runs one IMM cycle
+(Bar-Shalom, Li & Kirubarajan 2001, §11.6.6) for all trackers in a single numba loop:
+
+1. mixing probabilities ``μ_{i|j} = π_ij μ_i / c̄_j`` with ``c̄_j = Σ_i π_ij μ_i``;
+2. mixed initial conditions ``x0j = Σ_i μ_{i|j} x_i``,
+   ``P0j = Σ_i μ_{i|j} [P_i + (x_i − x0j)(x_i − x0j)ᵀ]``;
+3. mode-matched Kalman filtering: predict ``x_j = F_j x0j + u_j``,
+   ``P_j = F_j P0j F_jᵀ + Q_j``; update with gain ``K_j = P_j Hᵀ S_j⁻¹``, Joseph-form
+   covariance, and the Gaussian likelihood ``Λ_j = N(z; H x_j, S_j)``;
+4. mode probabilities ``μ_j = Λ_j c̄_j / Σ_l Λ_l c̄_l``, computed in log space with
+   log-sum-exp so that no likelihood underflows;
+5. combination ``x = Σ_j μ_j x_j``, ``P = Σ_j μ_j [P_j + (x_j − x)(x_j − x)ᵀ]``.
+
+Missing measurements and gating
+-------------------------------
+A measurement row containing any NaN (or inf) means "no measurement": that tracker is
+predicted only (steps 1–3a), its mode probabilities become ``c̄``. A measurement that no
+mode explains — every reachable mode's Mahalanobis distance ``d²_j = ν_jᵀ S_j⁻¹ ν_j``
+exceeds the chi-square quantile of ``gate_probability`` for ``m`` degrees of freedom — is
+treated the same way and flagged in :attr:`IMM.gated`: an outlier neither produces NaN nor
+erases the mode probabilities. Within the gate the result is the textbook IMM, equal to
+``filterpy.kalman.IMMEstimator`` to rounding.
+
+Units are whatever the model uses; in this project SI (m, m/s, rad/s), state
+``[x, vx, y, vy, Ω]``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from airspace_sim.dynamics.markov import validate_transition_matrix
+from airspace_sim.errors import UserError
+from airspace_sim.tracking import _kernels
+
+#: Default gate: a measurement is dropped when it lies outside the 1 − 10⁻⁶ chi-square
+#: region of every mode (d² > 27.6 for m = 2): an in-model measurement is dropped
+#: about once per million updates, a 10-sigma outlier always.
+DEFAULT_GATE_PROBABILITY = 1.0 - 1e-6
+
+
+def _array(value, name: str, ndim: int | tuple, shape=None) -> np.ndarray:
+    try:
+        a = np.array(value, dtype=float, order="C")
+    except (TypeError, ValueError) as exc:
+        raise UserError(f"IMM {name}: not a numeric array ({exc})") from None
+    dims = (ndim,) if isinstance(ndim, int) else ndim
+    if a.ndim not in dims:
+        raise UserError(f"IMM {name}: expected {' or '.join(f'{d}-d' for d in dims)} array, got shape {a.shape}")
+    if shape is not None and a.shape != tuple(shape):
+        raise UserError(f"IMM {name}: expected shape {tuple(shape)}, got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        idx = tuple(int(i) for i in np.argwhere(~np.isfinite(a))[0])
+        raise UserError(f"IMM {name}: non-finite value {a[idx]!r} at index {list(idx)}")
+    return a
+
+
+def _check_symmetric(a: np.ndarray, name: str) -> np.ndarray:
+    """Raise unless ``a`` (..., k, k) is symmetric to 1e-9 relative; return it symmetrised."""
+    at = np.swapaxes(a, -1, -2)
+    scale = np.maximum(np.abs(a).max(axis=(-1, -2), keepdims=True), np.finfo(float).tiny)
+    bad = np.abs(a - at) > 1e-9 * scale
+    if np.any(bad):
+        idx = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise UserError(f"IMM {name}: not symmetric (entry {list(idx)} = {a[idx]!r} differs from its transpose)")
+    return np.ascontiguousarray(0.5 * (a + at))
+
+
+def _check_psd(a: np.ndarray, name: str, strict: bool) -> None:
+    """Raise unless every matrix of ``a`` (..., k, k) is positive (semi-)definite."""
+    flat = a.reshape((-1,) + a.shape[-2:])
+    if flat.shape[0] == 0:
+        return
+    w = np.linalg.eigvalsh(flat)
+    scale = np.maximum(np.abs(w).max(axis=-1), np.finfo(float).tiny)
+    bad = (w[:, 0] <= 0) if strict else (w[:, 0] < -1e-12 * scale)
+    if np.any(bad):
+        i = int(np.flatnonzero(bad)[0])
+        where = f" (matrix {np.unravel_index(i, a.shape[:-2])})" if a.ndim > 2 else ""
+        kind = "positive definite" if strict else "positive semi-definite"
+        raise UserError(f"IMM {name}: not {kind}{where}: smallest eigenvalue {w[i, 0]!r}")
+
+
+def _nonzeros(mats: np.ndarray):
+    """Row, column, value of the non-zeros of each (k, l) matrix in ``mats`` (G, k, l), padded."""
+    G = mats.shape[0]
+    nnz = np.array([np.count_nonzero(a) for a in mats], dtype=np.int64)
+    K = max(int(nnz.max(initial=0)), 1)
+    rows = np.zeros((G, K), dtype=np.int64)
+    cols = np.zeros((G, K), dtype=np.int64)
+    vals = np.zeros((G, K))
+    for g, a in enumerate(mats):
+        r, c = np.nonzero(a)
+        rows[g, : r.size], cols[g, : r.size], vals[g, : r.size] = r, c, a[r, c]
+    return rows, cols, vals, nnz
+
+
+class IMM:
+    """Batched IMM estimator: ``B`` independent trackers sharing one jump-Markov model.
+
+    Parameters
+    ----------
+    transitions : (M, n, n)
+        Mode transition matrices ``F_j``.
+    process_noise : (M, n, n) or (n, n)
+        Process-noise covariances ``Q_j`` (symmetric, positive semi-definite).
+    measurement_matrix : (m, n)
+        ``H``.
+    measurement_noise : (m, m)
+        ``R`` (symmetric, positive definite).
+    transition_matrix : (M, M)
+        Mode chain ``Π``; row i = ``Pr(next mode | mode i)`` (rows sum to 1).
+    x0 : (B, n)
+        Initial state of each tracker; every mode starts from it.
+    P0 : (B, n, n) or (n, n)
+        Initial covariance (symmetric positive definite); every mode starts from it.
+    mu0 : (B, M) or (M,)
+        Initial mode probabilities (non-negative, rows sum to 1).
+    offsets : (M, n), optional
+        Per-mode additive term ``u_j``: mode j predicts ``x' = F_j x + u_j``.
+    gate_probability : float in (0, 1]
+        Chi-square gate (``m`` degrees of freedom) on every mode's ``d²``; 1 disables
+        gating. Default :data:`DEFAULT_GATE_PROBABILITY` = 1 − 10⁻⁶.
+
+    Attributes (all read-only views; a step replaces them, never mutates them)
+    ---------------------------------------------------------------------------
+    x (B, n), P (B, n, n), mu (B, M)
+        Combined posterior (paper §IV step 5) and mode probabilities (step 4).
+    x_modes (B, M, n), P_modes (B, M, n, n)
+        Mode-conditioned posteriors (step 3).
+    nis (B,)
+        Last step's normalised innovation squared of the mixture innovation
+        ``ν = z − Σ_j c̄_j ẑ_j`` with ``S = Σ_j c̄_j [S_j + (ẑ_j − ẑ)(ẑ_j − ẑ)ᵀ]``; NaN where
+        there was no measurement, computed (typically large) where it was gated.
+    log_likelihood (B, M)
+        Last step's ``log N(z; ẑ_j, S_j)`` per mode; NaN where there was no measurement,
+        computed (but not used) where the measurement was gated.
+    gated (B,) bool
+        Last step's measurement was finite but outside every mode's gate (predict only).
+    """
+
+    def __init__(
+        self,
+        transitions,
+        process_noise,
+        measurement_matrix,
+        measurement_noise,
+        transition_matrix,
+        x0,
+        P0,
+        mu0,
+        offsets=None,
+        gate_probability: float = DEFAULT_GATE_PROBABILITY,
+    ):
+        F = _array(transitions, "transitions", 3)
+        M, n, n2 = F.shape
+        if n != n2 or n == 0 or M == 0:
+            raise UserError(f"IMM transitions: expected shape (M, n, n), got {F.shape}")
+        Q = _array(process_noise, "process_noise", (2, 3))
+        if Q.shape == (n, n):
+            Q = np.broadcast_to(Q, (M, n, n)).copy()
+        if Q.shape != (M, n, n):
+            raise UserError(f"IMM process_noise: expected shape {(M, n, n)} (like transitions), got {Q.shape}")
+        Q = _check_symmetric(Q, "process_noise")
+        _check_psd(Q, "process_noise", strict=False)
+        H = _array(measurement_matrix, "measurement_matrix", 2)
+        if H.shape[1] != n or H.shape[0] == 0:
+            raise UserError(f"IMM measurement_matrix: expected shape (m, {n}), got {H.shape}")
+        m = H.shape[0]
+        R = _array(measurement_noise, "measurement_noise", 2, (m, m))
+        R = _check_symmetric(R, "measurement_noise")
+        _check_psd(R, "measurement_noise", strict=True)
+        Pi = validate_transition_matrix(transition_matrix, name="IMM transition_matrix")
+        if Pi.shape != (M, M):
+            raise UserError(f"IMM transition_matrix: expected shape {(M, M)} for {M} modes, got {Pi.shape}")
+        Pi = np.ascontiguousarray(Pi / Pi.sum(axis=1, keepdims=True))
+        U = np.zeros((M, n)) if offsets is None else _array(offsets, "offsets", 2, (M, n))
+        try:
+            p = float(gate_probability)
+        except (TypeError, ValueError):
+            raise UserError(f"IMM gate_probability: must be a number in (0, 1], got {gate_probability!r}") from None
+        if not (0.0 < p <= 1.0):
+            raise UserError(f"IMM gate_probability: must be in (0, 1], got {gate_probability!r}")
+        if p == 1.0:
+            gate_d2 = np.inf
+        else:
+            from scipy.stats import chi2
+
+            gate_d2 = float(chi2.ppf(p, m))
+
+        self._F, self._Q, self._U, self._H, self._R, self._Pi = F, Q, U, H, R, Pi
+        self._Fr, self._Fc, self._Fv, self._Fnnz = _nonzeros(F)
+        Hr, Hc, Hv, _ = _nonzeros(H[None])
+        nh = int(np.count_nonzero(H))
+        self._Hr, self._Hc, self._Hv = Hr[0, :nh].copy(), Hc[0, :nh].copy(), Hv[0, :nh].copy()
+        self.gate_probability = p
+        #: chi-square threshold on d² (inf = no gating)
+        self.gate_threshold = gate_d2
+        self.M, self.n, self.m = M, n, m
+
+        x0, P0, mu0 = self._initial(x0, P0, mu0, "")
+        B = x0.shape[0]
+        self._xm = np.ascontiguousarray(np.broadcast_to(x0[:, None, :], (B, M, n)))
+        self._Pm = np.ascontiguousarray(np.broadcast_to(P0[:, None], (B, M, n, n)))
+        self._mu = mu0
+        self._x = x0
+        self._P = P0
+        self._nis = np.full(B, np.nan)
+        self._ll = np.full((B, M), np.nan)
+        self._gated = np.zeros(B, dtype=bool)
+        # A combined estimate consistent with filterpy's constructor (Σ μ_j x_j with equal x_j)
+        self._x, self._P = self._combine(self._xm, self._Pm, self._mu)
+
+    # ------------------------------------------------------------------ helpers
+    def _initial(self, x0, P0, mu0, where: str):
+        n, M = self.n, self.M
+        x0 = _array(x0, f"{where}x0", 2)
+        if x0.shape[1] != n:
+            raise UserError(f"IMM {where}x0: expected shape (B, {n}), got {x0.shape}")
+        B = x0.shape[0]
+        P0 = _array(P0, f"{where}P0", (2, 3))
+        if P0.shape == (n, n):
+            P0 = np.broadcast_to(P0, (B, n, n)).copy()
+        if P0.shape != (B, n, n):
+            raise UserError(f"IMM {where}P0: expected shape {(B, n, n)} or {(n, n)}, got {P0.shape}")
+        P0 = _check_symmetric(P0, f"{where}P0")
+        _check_psd(P0, f"{where}P0", strict=True)
+        mu0 = _array(mu0, f"{where}mu0", (1, 2))
+        if mu0.shape == (M,):
+            mu0 = np.broadcast_to(mu0, (B, M)).copy()
+        if mu0.shape != (B, M):
+            raise UserError(f"IMM {where}mu0: expected shape {(B, M)} or {(M,)}, got {mu0.shape}")
+        if np.any(mu0 < 0):
+            i, j = np.argwhere(mu0 < 0)[0]
+            raise UserError(f"IMM {where}mu0: entry [{i}, {j}] = {mu0[i, j]!r} is negative")
+        sums = mu0.sum(axis=1)
+        bad = np.flatnonzero(np.abs(sums - 1.0) > 1e-6)
+        if bad.size:
+            raise UserError(f"IMM {where}mu0: row {bad[0]} sums to {sums[bad[0]]!r}, not 1")
+        mu0 = np.ascontiguousarray(mu0 / sums[:, None])
+        return x0, P0, mu0
+
+    @staticmethod
+    def _combine(xm, Pm, mu):
+        x = np.einsum("bj,bjk->bk", mu, xm)
+        d = xm - x[:, None, :]
+        P = np.einsum("bj,bjkl->bkl", mu, Pm + d[..., :, None] * d[..., None, :])
+        P = 0.5 * (P + np.swapaxes(P, -1, -2))
+        return np.ascontiguousarray(x), np.ascontiguousarray(P)
+
+    @staticmethod
+    def _ro(a: np.ndarray) -> np.ndarray:
+        v = a.view()
+        v.flags.writeable = False
+        return v
+
+    # --------------------------------------------------------------- properties
+    @property
+    def B(self) -> int:
+        """Number of trackers."""
+        return self._xm.shape[0]
+
+    @property
+    def x(self) -> np.ndarray:
+        """Combined posterior state (B, n) (paper §IV step 5)."""
+        return self._ro(self._x)
+
+    @property
+    def P(self) -> np.ndarray:
+        """Combined posterior covariance (B, n, n) (paper §IV step 5)."""
+        return self._ro(self._P)
+
+    @property
+    def mu(self) -> np.ndarray:
+        """Mode probabilities (B, M) (paper §IV step 4)."""
+        return self._ro(self._mu)
+
+    @property
+    def x_modes(self) -> np.ndarray:
+        """Mode-conditioned posterior states (B, M, n) (paper §IV step 3)."""
+        return self._ro(self._xm)
+
+    @property
+    def P_modes(self) -> np.ndarray:
+        """Mode-conditioned posterior covariances (B, M, n, n) (paper §IV step 3)."""
+        return self._ro(self._Pm)
+
+    @property
+    def nis(self) -> np.ndarray:
+        """Last step's mixture NIS (B,); NaN where no measurement (see class docstring)."""
+        return self._ro(self._nis)
+
+    @property
+    def log_likelihood(self) -> np.ndarray:
+        """Last step's per-mode log-likelihoods (B, M); NaN where no measurement."""
+        return self._ro(self._ll)
+
+    @property
+    def gated(self) -> np.ndarray:
+        """Last step: finite measurement rejected by the gate (B,) bool."""
+        return self._ro(self._gated)
+
+    # ------------------------------------------------------------------ methods
+    def step(self, z) -> None:
+        """One IMM cycle (paper §IV steps 1–5) for every tracker.
+
+        Parameters
+        ----------
+        z : (B, m)
+            Measurements; a row with any NaN/inf means no measurement (predict only).
+        """
+        z = np.ascontiguousarray(z, dtype=float)
+        B, M, n = self._xm.shape
+        if z.shape != (B, self.m):
+            raise UserError(f"IMM.step: z must have shape {(B, self.m)}, got {z.shape}")
+        xm = np.empty((B, M, n))
+        Pm = np.empty((B, M, n, n))
+        mu = np.empty((B, M))
+        x = np.empty((B, n))
+        P = np.empty((B, n, n))
+        nis = np.empty(B)
+        ll = np.empty((B, M))
+        gated = np.empty(B, dtype=np.bool_)
+        _kernels.imm_step(
+            self._F, self._Fr, self._Fc, self._Fv, self._Fnnz, self._Q, self._U,
+            self._H, self._Hr, self._Hc, self._Hv, self._R, self._Pi, self.gate_threshold,
+            z, self._xm, self._Pm, self._mu,
+            xm, Pm, mu, x, P, nis, ll, gated,
+        )  # fmt: skip
+        self._xm, self._Pm, self._mu, self._x, self._P = xm, Pm, mu, x, P
+        self._nis, self._ll, self._gated = nis, ll, gated
+
+    def append(self, x0, P0, mu0) -> np.ndarray:
+        """Add trackers at the end of the batch; return their row indices (k,) int.
+
+        x0 (k, n), P0 (k, n, n) or (n, n), mu0 (k, M) or (M,), as in the constructor. Their
+        ``nis``/``log_likelihood`` are NaN and ``gated`` False until their first step.
+        """
+        x0, P0, mu0 = self._initial(x0, P0, mu0, "append ")
+        k = x0.shape[0]
+        B, M, n = self._xm.shape
+        xm = np.ascontiguousarray(np.broadcast_to(x0[:, None, :], (k, M, n)))
+        Pm = np.ascontiguousarray(np.broadcast_to(P0[:, None], (k, M, n, n)))
+        x, P = self._combine(xm, Pm, mu0)
+        self._xm = np.concatenate([self._xm, xm])
+        self._Pm = np.concatenate([self._Pm, Pm])
+        self._mu = np.concatenate([self._mu, mu0])
+        self._x = np.concatenate([self._x, x])
+        self._P = np.concatenate([self._P, P])
+        self._nis = np.concatenate([self._nis, np.full(k, np.nan)])
+        self._ll = np.concatenate([self._ll, np.full((k, M), np.nan)])
+        self._gated = np.concatenate([self._gated, np.zeros(k, dtype=bool)])
+        return np.arange(B, B + k)
+
+    def remove(self, indices) -> None:
+        """Drop the trackers at ``indices`` (int array-like, or a (B,) bool mask).
+
+        The remaining trackers keep their relative order (and their exact state).
+        """
+        idx = np.asarray(indices)
+        B = self.B
+        if idx.dtype == bool:
+            if idx.shape != (B,):
+                raise UserError(f"IMM.remove: boolean mask must have shape {(B,)}, got {idx.shape}")
+            idx = np.flatnonzero(idx)
+        elif idx.size == 0:
+            idx = idx.astype(np.int64)
+        elif not np.issubdtype(idx.dtype, np.integer):
+            raise UserError(f"IMM.remove: indices must be integers, got dtype {idx.dtype}")
+        idx = idx.reshape(-1)
+        if idx.size and (idx.min() < -B or idx.max() >= B):
+            raise UserError(f"IMM.remove: index out of range for {B} trackers: {idx.tolist()}")
+        keep = np.ones(B, dtype=bool)
+        keep[idx] = False
+        for name in ("_xm", "_Pm", "_mu", "_x", "_P", "_nis", "_ll", "_gated"):
+            setattr(self, name, np.ascontiguousarray(getattr(self, name)[keep]))
+
+    def predict_modes(self, steps: int):
+        """Each mode's own model propagated 1..steps steps ahead, without mixing.
+
+        From the mode-conditioned posteriors, ``x ← F_j x + u_j``, ``P ← F_j P F_jᵀ + Q_j``.
+
+        Returns
+        -------
+        xs : (B, M, steps, n)
+        Ps : (B, M, steps, n, n)
+        """
+        if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 0:
+            raise UserError(f"IMM.predict_modes: steps must be a non-negative integer, got {steps!r}")
+        steps = int(steps)
+        B, M, n = self._xm.shape
+        xs = np.empty((B, M, steps, n))
+        Ps = np.empty((B, M, steps, n, n))
+        _kernels.predict_modes(self._F, self._Q, self._U, self._xm, self._Pm, steps, xs, Ps)
+        return xs, Ps
+
+    def __repr__(self) -> str:
+        return f"IMM(B={self.B}, M={self.M}, n={self.n}, m={self.m}, gate_probability={self.gate_probability})"
