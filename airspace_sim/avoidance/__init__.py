@@ -1,1 +1,28 @@
-"""TODO"""
+"""Conflict detection and avoidance (paper §V; issue 3).
+
+- :mod:`.escape`: the paper's escape angle ``θ`` in the relative frame (§V, Figure 3).
+- :mod:`.heading`: exact world-frame heading changes (own speed kept, heading turned).
+- :mod:`.bands`: multi-intruder heading bands over a look-ahead (DAIDALUS-style).
+- :mod:`.probability`: conflict probability from the IMM's mode mixture.
+- :mod:`.resolvers`: the registry entries ``"none"``, ``"seed"``, ``"seed-world"``,
+  ``"bands"``, ``"bands-probabilistic"``.
+
+Units: metres, seconds, radians; angles CCW positive (a negative heading change is a right
+turn); relative quantities are intruder minus ownship.
+"""
+
+from airspace_sim.avoidance.bands import BandResult, band_search, resume_heading_change
+from airspace_sim.avoidance.escape import escape_angle, predicted_conflict
+from airspace_sim.avoidance.heading import tangent_heading_change
+from airspace_sim.avoidance.probability import conflict_probability, probability_inside_circle
+
+__all__ = [
+    "BandResult",
+    "band_search",
+    "conflict_probability",
+    "escape_angle",
+    "predicted_conflict",
+    "probability_inside_circle",
+    "resume_heading_change",
+    "tangent_heading_change",
+]

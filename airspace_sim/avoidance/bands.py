@@ -1,0 +1,236 @@
+"""Multi-intruder heading bands (DAIDALUS-style; ``shared/design/anchors.md``).
+
+For each ownship ``n`` (``N`` of them) with ``K`` intruder slots, candidate heading changes
+``ψ`` within ``±max_heading_change[n]`` are scored by the closest point of approach (CPA)
+over the look-ahead ``[0, T]`` under straight-line relative motion:
+
+    v_rel(ψ) = v_i − R(ψ)·v_o,  t_cpa = clamp(−r·v_rel / |v_rel|², 0, T),  d = |r + t_cpa·v_rel|
+
+all as arrays ``(N, C, K)``. A candidate is *clear* when ``d ≥ r_safe·(1 + margin)`` for every
+valid intruder (to a relative tolerance :data:`CLEAR_TOLERANCE`, so the exact boundary
+candidates below count as clear). The band is the clear set over the candidates.
+
+Candidates: a grid ``k·resolution`` inside the limit, the limits ``±max_heading_change[n]``,
+and (``exact_candidates=True``) the exact boundaries of each intruder's clear set from
+:mod:`airspace_sim.avoidance.heading` with radius ``r_safe·(1 + margin)``: both tangents
+(CPA inside the look-ahead) and ``d(T) = radius`` (CPA at the end of the look-ahead).
+
+Choice: the clear candidate of smallest ``|ψ|``; ties go to the right turn (``ψ < 0``), then to
+the lower candidate index. If none is clear, the candidate that maximises the minimum over
+intruders of ``d / (r_safe·(1+margin))`` (for one common radius: of the CPA distance), tie-broken
+the same way. Angles radians CCW positive, distances metres, times seconds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from airspace_sim.avoidance.heading import (
+    range_at_time_heading_changes,
+    tangent_heading_changes,
+    wrap_angle,
+)
+
+#: Relative tolerance of the clear test ``d ≥ radius·(1 − CLEAR_TOLERANCE)``.
+CLEAR_TOLERANCE = 1e-9
+
+
+@dataclass
+class BandResult:
+    """Result of :func:`band_search` (``N`` ownships, ``C`` candidates).
+
+    heading_change : (N,) chosen heading change, rad, CCW positive.
+    conflict : (N,) bool, the current heading (``ψ = 0``) is not clear.
+    candidates : (N, C) candidate heading changes, rad, sorted by preference
+        (``|ψ|``, right turn first); NaN for unused slots.
+    band : (N, C) bool, candidate is clear (the band to draw); False for unused slots.
+    min_ratio : (N, C) minimum over intruders of CPA distance / radius (``inf`` with no
+        intruder, ``-inf`` for unused slots).
+    """
+
+    heading_change: np.ndarray
+    conflict: np.ndarray
+    candidates: np.ndarray
+    band: np.ndarray
+    min_ratio: np.ndarray
+
+
+def cpa_min_ratio(own_velocity, rel_position, rel_velocity, valid, candidates, radius, lookahead_s):
+    """Minimum over intruders of (CPA distance over ``[0, T]``) / radius, per candidate.
+
+    Parameters
+    ----------
+    own_velocity : (N, 2) m/s; rel_position : (N, K, 2) m; rel_velocity : (N, K, 2) m/s
+        (intruder minus ownship, world frame, at the current heading).
+    valid : (N, K) bool, intruder slot in use.
+    candidates : (N, C) heading changes, rad (NaN allowed: gives NaN rows).
+    radius : float or (N, K) array, m (the clear distance ``r_safe·(1+margin)``).
+    lookahead_s : float, T in seconds.
+
+    Returns
+    -------
+    (N, C) array; ``inf`` where the ownship has no valid intruder.
+    """
+    vo = np.asarray(own_velocity, dtype=float)
+    r = np.asarray(rel_position, dtype=float)
+    vrel0 = np.asarray(rel_velocity, dtype=float)
+    valid = np.asarray(valid, dtype=bool)
+    psi = np.asarray(candidates, dtype=float)
+    radius = np.broadcast_to(np.asarray(radius, dtype=float), valid.shape)
+    vi = vrel0 + vo[:, None, :]  # (N, K, 2) intruder world velocity
+    c, s = np.cos(psi), np.sin(psi)  # (N, C)
+    rvx = (c * vo[:, 0:1] - s * vo[:, 1:2])[:, :, None]  # (N, C, 1)
+    rvy = (s * vo[:, 0:1] + c * vo[:, 1:2])[:, :, None]
+    vx = vi[:, None, :, 0] - rvx  # (N, C, K)
+    vy = vi[:, None, :, 1] - rvy
+    rx = r[:, None, :, 0]
+    ry = r[:, None, :, 1]
+    v2 = vx * vx + vy * vy
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(v2 > 0, -(rx * vx + ry * vy) / np.where(v2 > 0, v2, 1.0), 0.0)
+    t = np.clip(t, 0.0, lookahead_s)
+    d = np.hypot(rx + t * vx, ry + t * vy)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = d / radius[:, None, :]
+    ratio = np.where(valid[:, None, :], ratio, np.inf)
+    if ratio.shape[-1] == 0:
+        return np.full(psi.shape, np.inf)
+    return ratio.min(axis=-1)
+
+
+def candidate_grid(max_heading_change, resolution, extra=None):
+    """Candidates ``(N, C)``: grid ``k·resolution``, the limits ``±max``, and ``extra`` (N, E).
+
+    Entries outside ``±max_heading_change[n]`` (or NaN) are set to NaN.
+    """
+    mx = np.asarray(max_heading_change, dtype=float)
+    top = float(np.nanmax(mx)) if mx.size else 0.0
+    m = int(np.floor(top / resolution + 1e-9)) if np.isfinite(top) and top > 0 else 0
+    grid = np.arange(-m, m + 1, dtype=float) * resolution
+    parts = [np.broadcast_to(grid, (mx.shape[0], grid.size)), -mx[:, None], mx[:, None]]
+    if extra is not None:
+        parts.append(np.asarray(extra, dtype=float).reshape(mx.shape[0], -1))
+    cand = np.concatenate(parts, axis=1)
+    inside = np.abs(cand) <= mx[:, None] * (1 + 1e-12) + 1e-15
+    return np.where(inside, cand, np.nan)
+
+
+def exact_boundary_candidates(own_velocity, rel_position, rel_velocity, valid, radius, lookahead_s):
+    """Exact boundary heading changes of each intruder's clear set, ``(N, 6K)`` (NaN if none).
+
+    Both tangents from :func:`~airspace_sim.avoidance.heading.tangent_heading_changes` (two
+    roots each) and the two roots of ``|r + T·v_rel(ψ)| = radius``.
+    """
+    vo = np.asarray(own_velocity, dtype=float)[:, None, :]
+    r = np.asarray(rel_position, dtype=float)
+    vi = np.asarray(rel_velocity, dtype=float) + vo
+    radius = np.broadcast_to(np.asarray(radius, dtype=float), r.shape[:-1])
+    parts = [
+        tangent_heading_changes(vo, vi, r, radius, -1.0),
+        tangent_heading_changes(vo, vi, r, radius, 1.0),
+        range_at_time_heading_changes(vo, vi, r, radius, np.full(r.shape[:-1], lookahead_s)),
+    ]
+    out = np.concatenate(parts, axis=-1)  # (N, K, 6)
+    out = np.where(np.asarray(valid, dtype=bool)[..., None], out, np.nan)
+    return out.reshape(out.shape[0], -1)
+
+
+def band_search(
+    own_velocity,
+    rel_position,
+    rel_velocity,
+    valid,
+    max_heading_change,
+    r_safe=3000.0,
+    lookahead_s=120.0,
+    margin=0.1,
+    resolution=np.radians(1.0),
+    exact_candidates=True,
+):
+    """Choose each ownship's heading change against all its intruders at once.
+
+    Parameters
+    ----------
+    own_velocity : (N, 2) m/s, world frame.
+    rel_position, rel_velocity : (N, K, 2) intruder minus ownship, m and m/s.
+    valid : (N, K) bool.
+    max_heading_change : (N,) rad, ``|ψ| ≤`` this.
+    r_safe : float or (N, K) m; margin : float (clear distance ``r_safe·(1+margin)``).
+    lookahead_s : float, s; resolution : grid step, rad; exact_candidates : bool.
+
+    Returns
+    -------
+    :class:`BandResult`
+    """
+    vo = np.asarray(own_velocity, dtype=float).reshape(-1, 2)
+    n = vo.shape[0]
+    r = np.asarray(rel_position, dtype=float).reshape(n, -1, 2)
+    v = np.asarray(rel_velocity, dtype=float).reshape(n, -1, 2)
+    valid = np.asarray(valid, dtype=bool).reshape(n, -1)
+    mx = np.broadcast_to(np.asarray(max_heading_change, dtype=float), (n,))
+    radius = np.asarray(r_safe, dtype=float) * (1.0 + margin)
+    extra = None
+    if exact_candidates and r.shape[1] > 0:
+        extra = exact_boundary_candidates(vo, r, v, valid, radius, lookahead_s)
+    cand = candidate_grid(mx, resolution, extra)
+    # sort by preference: |ψ|, then right turn (ψ ≤ 0) first, then original index
+    usable = ~np.isnan(cand)
+    mag = np.where(usable, np.abs(cand), np.inf)
+    idx = np.broadcast_to(np.arange(cand.shape[1]), cand.shape)
+    order = np.lexsort((idx, cand > 0, mag), axis=-1)
+    cand = np.take_along_axis(cand, order, axis=-1)
+    usable = np.take_along_axis(usable, order, axis=-1)
+    ratio = cpa_min_ratio(vo, r, v, valid, np.where(usable, cand, 0.0), radius, lookahead_s)
+    ratio = np.where(usable, ratio, -np.inf)
+    band = usable & (ratio >= 1.0 - CLEAR_TOLERANCE)
+    rows = np.arange(n)
+    first_clear = np.argmax(band, axis=-1)
+    best = np.argmax(ratio, axis=-1)  # first maximum: preferred among ties
+    choice = np.where(band.any(axis=-1), first_clear, best)
+    heading_change = cand[rows, choice]
+    ratio0 = cpa_min_ratio(vo, r, v, valid, np.zeros((n, 1)), radius, lookahead_s)[:, 0]
+    conflict = ~(ratio0 >= 1.0 - CLEAR_TOLERANCE)
+    return BandResult(heading_change, conflict, cand, band, ratio)
+
+
+def resume_heading_change(
+    own_velocity,
+    desired_heading,
+    rel_position,
+    rel_velocity,
+    valid,
+    max_heading_change,
+    r_safe=3000.0,
+    lookahead_s=120.0,
+    margin=0.1,
+):
+    """Heading change back toward ``desired_heading`` if that turn is clear.
+
+    The turn is ``wrap(desired − current)`` limited to ``±max_heading_change``; it is applied
+    only where it is clear of every valid intruder (same test as :func:`band_search`).
+
+    Parameters
+    ----------
+    own_velocity : (N, 2) m/s; desired_heading : (N,) rad (world heading, ``atan2(vy, vx)``).
+    rel_position, rel_velocity, valid, max_heading_change, r_safe, lookahead_s, margin:
+        as in :func:`band_search`.
+
+    Returns
+    -------
+    heading_change : (N,) rad, the limited turn where clear, else 0.
+    clear : (N,) bool, that turn is clear.
+    """
+    vo = np.asarray(own_velocity, dtype=float).reshape(-1, 2)
+    n = vo.shape[0]
+    mx = np.broadcast_to(np.asarray(max_heading_change, dtype=float), (n,))
+    heading = np.arctan2(vo[:, 1], vo[:, 0])
+    delta = np.clip(wrap_angle(np.asarray(desired_heading, dtype=float) - heading), -mx, mx)
+    r = np.asarray(rel_position, dtype=float).reshape(n, -1, 2)
+    v = np.asarray(rel_velocity, dtype=float).reshape(n, -1, 2)
+    valid = np.asarray(valid, dtype=bool).reshape(n, -1)
+    radius = np.asarray(r_safe, dtype=float) * (1.0 + margin)
+    ratio = cpa_min_ratio(vo, r, v, valid, delta[:, None], radius, lookahead_s)[:, 0]
+    clear = ratio >= 1.0 - CLEAR_TOLERANCE
+    return np.where(clear, delta, 0.0), clear

@@ -1,0 +1,170 @@
+"""World-frame exact heading changes (``shared/design/seed-model.md`` §3, last paragraph).
+
+The paper (§V) rotates the *relative* velocity by ``θ``. A real ownship can only turn its own
+velocity at constant speed: with ``v_rel(ψ) = v_i − R(ψ)·v_o`` the relative velocities it can
+reach lie on a circle of radius ``|v_o|`` around ``v_i``. This module intersects that circle
+with the lines that matter, in closed form:
+
+- :func:`tangent_heading_change`: ``v_rel(ψ)`` along a tangent from ``B`` to the safety circle
+  (the boundary of the collision cone, infinite look-ahead);
+- :func:`range_at_time_heading_changes`: ``|B + t·v_rel(ψ)| = R`` at a fixed time ``t`` (the
+  boundary of the clear set of a finite look-ahead, where the closest point is at ``t``).
+
+Both reduce to ``a·cos(ψ) + b·sin(ψ) = c`` with two roots ``ψ = φ ± acos(c/√(a²+b²))``.
+Angles are radians, CCW positive; ``ψ < 0`` is a right turn. Rotation
+``R(ψ) = [[cos ψ, −sin ψ], [sin ψ, cos ψ]]``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from airspace_sim.avoidance.escape import escape_side, line_of_sight_angles
+
+
+def wrap_angle(a):
+    """Wrap angles to ``[−π, π)``, radians, elementwise."""
+    return (np.asarray(a, dtype=float) + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def rotate(v, angle):
+    """Rotate vectors ``v`` (..., 2) CCW by ``angle`` (broadcastable to ``(...)``), radians."""
+    v = np.asarray(v, dtype=float)
+    c, s = np.cos(angle), np.sin(angle)
+    return np.stack([c * v[..., 0] - s * v[..., 1], s * v[..., 0] + c * v[..., 1]], axis=-1)
+
+
+def _solve_cos_sin(a, b, c):
+    """Roots ``ψ`` of ``a cos ψ + b sin ψ = c``: shape ``(..., 2)`` (NaN where none), wrapped."""
+    amp = np.hypot(a, b)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = c / amp
+    phi = np.arctan2(b, a)
+    ok = np.abs(ratio) <= 1.0
+    half = np.arccos(np.clip(ratio, -1.0, 1.0))
+    roots = np.stack([wrap_angle(phi - half), wrap_angle(phi + half)], axis=-1)
+    return np.where(ok[..., None], roots, np.nan)
+
+
+def tangent_direction(rel_position, r_safe, side):
+    """Unit direction of the tangent from ``B`` to the safety circle on ``side``, shape ``(..., 2)``.
+
+    ``side = +1``: the line of sight ``BO`` rotated CCW by ``β``; ``−1``: clockwise by ``β``
+    (``β = asin(R/|B|)``, ``π/2`` when inside). ``B = 0`` uses the line of sight ``(−1, 0)``.
+    """
+    b = np.asarray(rel_position, dtype=float)
+    beta, _ = line_of_sight_angles(b, np.zeros_like(b), r_safe)
+    dist = np.hypot(b[..., 0], b[..., 1])
+    los = np.where(dist[..., None] > 0, -b / np.where(dist > 0, dist, 1.0)[..., None], [-1.0, 0.0])
+    return rotate(los, np.asarray(side, dtype=float) * beta)
+
+
+def tangent_heading_changes(own_velocity, intruder_velocity, rel_position, r_safe, side):
+    """Both ownship heading changes that put ``v_rel`` on the tangent ray of ``side``.
+
+    Solves ``v_i − R(ψ)v_o = λu`` with ``u`` = :func:`tangent_direction` and ``λ ≥ 0``
+    (``λ < 0`` would be the tangent *line* traversed away from the circle, not the cone's
+    boundary). Writing ``n = perp(u)``, the condition ``n·R(ψ)v_o = n·v_i`` is
+    ``a cos ψ + b sin ψ = c`` with ``a = n·v_o``, ``b = n·perp(v_o)``, ``c = n·v_i``.
+
+    Parameters
+    ----------
+    own_velocity, intruder_velocity : array_like, shape ``(..., 2)``, m/s (world frame)
+    rel_position : array_like, shape ``(..., 2)``, intruder minus ownship, m
+    r_safe : float or array broadcastable to ``(...)``, m
+    side : ``±1`` or array broadcastable to ``(...)``
+
+    Returns
+    -------
+    ndarray, shape ``(..., 2)``
+        The two roots in ``[−π, π)`` radians, NaN where a root does not exist or has ``λ < 0``.
+    """
+    vo = np.asarray(own_velocity, dtype=float)
+    vi = np.asarray(intruder_velocity, dtype=float)
+    u = tangent_direction(rel_position, r_safe, side)
+    n = np.stack([-u[..., 1], u[..., 0]], axis=-1)
+    vo_perp = np.stack([-vo[..., 1], vo[..., 0]], axis=-1)
+    a = np.sum(n * vo, axis=-1)
+    b = np.sum(n * vo_perp, axis=-1)
+    c = np.sum(n * vi, axis=-1)
+    roots = _solve_cos_sin(a, b, c)
+    v_rel = vi[..., None, :] - rotate(vo[..., None, :], roots)
+    lam = np.sum(v_rel * u[..., None, :], axis=-1)
+    return np.where(lam >= 0.0, roots, np.nan)
+
+
+def tangent_heading_change(own_velocity, intruder_velocity, rel_position, r_safe, side=None):
+    """Smallest ownship heading change putting ``v_rel`` on a tangent to the safety circle.
+
+    The world-frame counterpart of :func:`~airspace_sim.avoidance.escape.escape_angle`:
+    the own speed is kept, only its heading turns by ``ψ``, and ``v_rel = v_i − R(ψ)v_o`` is
+    made to lie on the tangent ray from ``B`` (so the relative track from ``B`` just touches
+    the circle of radius ``r_safe``). When the intruder is static (``v_i = 0``) this equals
+    the paper's unclamped ``θ``.
+
+    Parameters
+    ----------
+    own_velocity, intruder_velocity : array_like, shape ``(..., 2)``
+        World-frame velocities, m/s.
+    rel_position : array_like, shape ``(..., 2)``
+        Intruder minus ownship position, m.
+    r_safe : float or array broadcastable to ``(...)``
+        Safety radius, m.
+    side : None, ``±1`` or array
+        Which tangent: ``None`` chooses the escape side of the current relative velocity
+        exactly as :func:`~airspace_sim.avoidance.escape.escape_side` (away from the line of
+        sight on the side it already passes; head-on → right turn side ``−1``).
+
+    Returns
+    -------
+    psi : ndarray, shape ``(...)``
+        Heading change, radians in ``[−π, π)``, CCW positive; the root of smallest ``|ψ|``
+        (a tie goes to the right turn, ``ψ < 0``). NaN where the tangent is unreachable at
+        the own speed.
+    reachable : ndarray of bool, shape ``(...)``
+    """
+    vo = np.asarray(own_velocity, dtype=float)
+    vi = np.asarray(intruder_velocity, dtype=float)
+    if side is None:
+        _, gamma = line_of_sight_angles(rel_position, vi - vo, r_safe)
+        side = escape_side(gamma)
+    roots = tangent_heading_changes(vo, vi, rel_position, r_safe, side)
+    psi = _smallest(roots)
+    return psi, ~np.isnan(psi)
+
+
+def range_at_time_heading_changes(own_velocity, intruder_velocity, rel_position, radius, t):
+    """Heading changes ``ψ`` with ``|B + t·v_rel(ψ)| = radius`` at time ``t`` > 0, shape ``(..., 2)``.
+
+    With ``P = B + t·v_i`` the condition ``|P − t·R(ψ)v_o|² = radius²`` is
+    ``P·R(ψ)v_o = (|P|² + t²|v_o|² − radius²) / (2t)``: again ``a cos ψ + b sin ψ = c``.
+    Roots in ``[−π, π)`` radians, NaN where none. Units: m, m/s, s.
+    """
+    vo = np.asarray(own_velocity, dtype=float)
+    vi = np.asarray(intruder_velocity, dtype=float)
+    b_ = np.asarray(rel_position, dtype=float)
+    t = np.asarray(t, dtype=float)
+    p = b_ + t[..., None] * vi
+    vo_perp = np.stack([-vo[..., 1], vo[..., 0]], axis=-1)
+    a = np.sum(p * vo, axis=-1)
+    b = np.sum(p * vo_perp, axis=-1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        c = (np.sum(p * p, axis=-1) + t**2 * np.sum(vo * vo, axis=-1) - np.asarray(radius) ** 2) / (
+            2.0 * t
+        )
+    return _solve_cos_sin(a, b, c)
+
+
+def _smallest(roots):
+    """The root of smallest ``|ψ|`` along the last axis (ties → negative), NaN if all NaN."""
+    mag = np.where(np.isnan(roots), np.inf, np.abs(roots))
+    # prefer the right turn on an exact tie: sort key |ψ| then (ψ > 0)
+    key = mag + 0.0
+    best = np.argmin(key, axis=-1)
+    other = 1 - best
+    tie = np.take_along_axis(key, other[..., None], -1)[..., 0] == np.take_along_axis(
+        key, best[..., None], -1
+    )[..., 0]
+    r_best = np.take_along_axis(roots, best[..., None], -1)[..., 0]
+    r_other = np.take_along_axis(roots, other[..., None], -1)[..., 0]
+    return np.where(tie & (r_other < r_best), r_other, r_best)
