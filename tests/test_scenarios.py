@@ -1,0 +1,350 @@
+"""Scenario loading, validation, overrides and generated traffic."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import typing
+
+import numpy as np
+import pytest
+
+from airspace_sim.errors import UserError
+from airspace_sim.scenarios import available, build_aircraft, from_dict, load, schema
+from airspace_sim.scenarios import loader
+from airspace_sim.scenarios.traffic import miss_distance, ring_min_radius
+
+SHIPPED = ["paper_encounter", "head_on", "crossing", "overtaking", "ring", "dense_random", "demo"]
+
+
+# --------------------------------------------------------------------------- shipped files
+
+
+def test_all_required_scenarios_are_shipped():
+    assert set(SHIPPED) <= set(available())
+
+
+@pytest.mark.parametrize("name", sorted(set(available()) | set(SHIPPED)))
+def test_shipped_scenario_loads_and_builds(name):
+    sc = load(name)
+    assert sc.name == name
+    assert sc.source.endswith(f"{name}.toml")
+    aircraft = build_aircraft(sc, np.random.default_rng(sc.seed))
+    assert aircraft, "a scenario without aircraft"
+    ids = [a.id for a in aircraft]
+    assert len(set(ids)) == len(ids)
+    assert sc.n_steps >= 1
+    # Every aircraft starts separated from every other (no loss of separation at t = 0).
+    pos = np.array([a.position for a in aircraft])
+    d = np.hypot(*(pos[:, None] - pos[None]).transpose(2, 0, 1))
+    np.fill_diagonal(d, np.inf)
+    assert d.min() > sc.separation.r_safe
+
+
+def test_load_by_path_equals_load_by_name():
+    sc = load("head_on")
+    by_path = load(loader.resolve("head_on"))
+    assert dataclasses.replace(by_path, source=sc.source) == sc
+
+
+def test_paper_encounter_matches_the_paper():
+    sc = load("paper_encounter")
+    assert sc.dt == pytest.approx(0.1)
+    assert sc.separation.r_safe == 3000.0
+    assert sc.model == "seed" and sc.tracker.model == "seed"
+    v = 285.841
+    for seed in range(20):
+        own, intruder = build_aircraft(sc, np.random.default_rng(seed))
+        assert own.speed == pytest.approx(v)
+        assert v <= intruder.speed <= 2 * v
+        rel = np.subtract(intruder.position, own.position)
+        assert np.hypot(*rel) == pytest.approx(4500.0)
+        vel = lambda a: a.speed * np.array(  # noqa: E731
+            [math.cos(math.radians(a.heading_deg)), math.sin(math.radians(a.heading_deg))]
+        )
+        d, t_cpa = miss_distance(rel, vel(intruder) - vel(own))
+        assert d < 3000.0 and t_cpa > 0
+        assert intruder.autopilot == "markov" and not intruder.avoid
+
+
+# --------------------------------------------------------------------------- schema-derived checks
+
+
+def test_range_table_names_existing_fields():
+    for key in loader.RANGES:
+        cls_name, field = key.split(".")
+        cls = getattr(schema, cls_name)
+        assert field in {f.name for f in dataclasses.fields(cls)}, key
+
+
+def test_every_schema_field_type_is_supported():
+    for cls in (schema.Scenario, schema.Separation, schema.SensorSpec, schema.TrackerSpec,
+                schema.ResolverSpec, schema.AircraftSpec, schema.TrafficSpec):
+        for name, tp in typing.get_type_hints(cls, vars(schema)).items():
+            assert loader.describe(tp), (cls.__name__, name)
+
+
+def test_defaults_round_trip():
+    sc = from_dict({"name": "x"})
+    assert sc == schema.Scenario(name="x")
+
+
+def _write(tmp_path, text, name="bad.toml"):
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+BASE = 'name = "t"\n'
+AIRCRAFT = """
+[[aircraft]]
+id = "a"
+position = [0.0, 0.0]
+heading_deg = 0.0
+speed = 200.0
+
+[[aircraft]]
+id = "b"
+position = [10000.0, 0.0]
+heading_deg = 180.0
+speed = {speed}
+"""
+
+
+@pytest.mark.parametrize(
+    "text, key, value, expect",
+    [
+        (BASE + "[traffic]\ncount = -3\n", "traffic.count", "-3", "non-negative integer"),
+        (BASE + "[traffic]\ncout = 3\n", "traffic.cout", "3", "unknown key"),
+        (BASE + "dt = 'fast'\n", "dt", "'fast'", "positive number"),
+        (BASE + "dt = 0\n", "dt", "0", "positive number"),
+        (BASE + "[sensor]\ndetection_probability = 1.5\n", "sensor.detection_probability", "1.5", "[0, 1]"),
+        (BASE + "[sensor]\nrange = true\n", "sensor.range", "true", "positive number"),
+        (BASE + "[traffic]\npattern = 'spiral'\n", "traffic.pattern", "'spiral'", "one of"),
+        (BASE + "model = 'nope'\n", "model", "'nope'", "one of"),
+        (BASE + "[separation]\nr_safe = nan\n", "separation.r_safe", "nan", "positive number"),
+        (BASE + AIRCRAFT.format(speed="-1.0"), "aircraft[1].speed", "-1.0", "positive"),
+        (BASE + AIRCRAFT.format(speed='"x"'), "aircraft[1].speed", "'x'", "positive number"),
+        (BASE + AIRCRAFT.format(speed="1.0") + "color = 'red'\n", "aircraft[1].color", "'red'", "unknown key"),
+        (BASE + "separation = 5\n", "separation", "5", "table"),
+        (BASE + "[[aircraft]]\nid = 'a'\nposition = [0, 0, 0]\nheading_deg = 0\nspeed = 1\n",
+         "aircraft[0].position", "[0, 0, 0]", "list of 2 numbers"),
+    ],
+)
+def test_bad_value_gives_one_line_with_file_key_value(tmp_path, text, key, value, expect):
+    path = _write(tmp_path, text)
+    with pytest.raises(UserError) as info:
+        load(path)
+    msg = str(info.value)
+    assert "\n" not in msg
+    assert msg.startswith(f"{loader.display_path(path)}: {key}: "), msg
+    assert value in msg and expect in msg, msg
+
+
+def test_missing_required_key(tmp_path):
+    path = _write(tmp_path, BASE + "[[aircraft]]\nid = 'a'\nposition = [0, 0]\nheading_deg = 0\n")
+    with pytest.raises(UserError, match=r"aircraft\[0\]\.speed: missing"):
+        load(path)
+
+
+def test_unknown_key_suggests_the_closest(tmp_path):
+    path = _write(tmp_path, BASE + "[sensor]\nsigam = 3\n")
+    with pytest.raises(UserError, match="did you mean 'sigma'"):
+        load(path)
+
+
+@pytest.mark.parametrize(
+    "text, line, col",
+    [
+        ('name = "t"\ndt = 1.0\n[traffic\ncount = 3\n', 3, None),
+        ('name = "t"\ndt = = 2\n', 2, 6),
+        ('name = "t"\nx = [1, 2\n', 3, None),
+    ],
+)
+def test_malformed_toml_names_line_and_column(tmp_path, text, line, col):
+    path = _write(tmp_path, text)
+    with pytest.raises(UserError) as info:
+        load(path)
+    msg = str(info.value)
+    assert "\n" not in msg
+    assert msg.startswith(f"{loader.display_path(path)}: invalid TOML at line {line}, column "), msg
+    if col is not None:
+        assert f"column {col}:" in msg
+
+
+@pytest.mark.parametrize(
+    "text, key",
+    [
+        (BASE + "[traffic]\npattern = 'ring'\ncount = 2\ncontrolled = 3\n", "traffic.controlled"),
+        (BASE + "dt = 0.3\n[sensor]\nperiod = 1.0\n", "sensor.period"),
+        (BASE + "[separation]\nnmac = 4000\n", "separation.nmac"),
+        (BASE + "[traffic]\npattern = 'ring'\n", "traffic.count"),
+        (BASE + "[traffic]\ncount = 4\n", "traffic.pattern"),
+        (BASE + "[traffic]\npattern = 'encounter'\ncount = 1\n", "traffic.pattern"),
+        (BASE + AIRCRAFT.format(speed="1.0").replace('id = "b"', 'id = "a"'), "aircraft[1].id"),
+    ],
+)
+def test_cross_field_checks(tmp_path, text, key):
+    path = _write(tmp_path, text)
+    with pytest.raises(UserError) as info:
+        load(path)
+    assert str(info.value).startswith(f"{loader.display_path(path)}: {key}: "), info.value
+
+
+def test_sensor_period_multiple_of_dt_with_float_rounding():
+    sc = from_dict({"name": "x", "dt": 0.1, "sensor": {"period": 0.3}})
+    assert sc.sensor.period == pytest.approx(0.3)
+
+
+def test_unknown_scenario_name_lists_known():
+    with pytest.raises(UserError, match=r"unknown scenario 'nope' \(known: .*head_on"):
+        load("nope")
+    with pytest.raises(UserError, match="no such scenario file"):
+        load("missing/dir/x.toml")
+
+
+# --------------------------------------------------------------------------- overrides
+
+
+def test_overrides_apply_before_validation():
+    sc = load("ring", ["traffic.count=64", "traffic.radius=70000", "sensor.kind=radar",
+                       "resolver.params.gain=2.5", "duration=10"])
+    assert sc.traffic.count == 64 and sc.traffic.radius == 70000.0
+    assert isinstance(sc.traffic.radius, float)
+    assert sc.resolver.params == {"gain": 2.5}
+    assert sc.duration == 10.0
+    assert len(build_aircraft(sc, np.random.default_rng(0))) == 64
+    # the file itself is untouched
+    assert load("ring").traffic.count == 32
+
+
+def test_override_list_index_and_list_value():
+    sc = load("head_on", ["aircraft[1].speed=150", "aircraft[0].waypoints=[[1, 2], [3, 4]]"])
+    assert sc.aircraft[1].speed == 150.0
+    assert sc.aircraft[0].waypoints == [(1.0, 2.0), (3.0, 4.0)]
+
+
+@pytest.mark.parametrize(
+    "override, start",
+    [
+        ("traffic.count=abc", "--set traffic.count: expected a non-negative integer, got 'abc'"),
+        ("traffic.count=-3", "--set traffic.count: expected a non-negative integer, got -3"),
+        ("traffic.cout=3", "--set traffic.cout: unknown key"),
+        ("sensor.detection_probability=2", "--set sensor.detection_probability: expected a probability"),
+        ("aircraft[5].speed=3", "--set aircraft[5].speed: index 5 out of range"),
+        ("dt.x=3", "--set dt.x: dt is not a table"),
+        ("traffic.count", "--set traffic.count: expected key=value"),
+        ("traffic..count=3", "--set traffic..count: malformed key"),
+        ("separation={r_safe = -1}", "--set separation.r_safe: expected a positive number, got -1"),
+    ],
+)
+def test_bad_override_is_reported_as_set(override, start):
+    with pytest.raises(UserError) as info:
+        load("head_on", [override])
+    msg = str(info.value)
+    assert "\n" not in msg
+    assert msg.startswith(start), msg
+
+
+def test_file_error_still_names_file_when_overrides_are_fine(tmp_path):
+    path = _write(tmp_path, BASE + "[traffic]\ncount = -3\n")
+    with pytest.raises(UserError, match=r"^.*bad\.toml: traffic\.count"):
+        load(path, ["dt=2"])
+
+
+# --------------------------------------------------------------------------- generated traffic
+
+
+def _ring(count=12, radius=30000.0, r_safe=3000.0, **traffic):
+    return from_dict({"name": "r", "separation": {"r_safe": r_safe},
+                      "traffic": {"pattern": "ring", "count": count, "radius": radius, **traffic}})
+
+
+def test_ring_geometry_closed_form():
+    n, R = 12, 30000.0
+    ac = build_aircraft(_ring(n, R), np.random.default_rng(0))
+    assert [a.id for a in ac] == [f"ring{i:02d}" for i in range(n)]
+    pos = np.array([a.position for a in ac])
+    np.testing.assert_allclose(np.hypot(pos[:, 0], pos[:, 1]), R)
+    angles = np.unwrap(np.arctan2(pos[:, 1], pos[:, 0]))
+    np.testing.assert_allclose(np.diff(angles), 2 * np.pi / n)
+    chords = np.hypot(*(pos - np.roll(pos, -1, axis=0)).T)
+    np.testing.assert_allclose(chords, 2 * R * math.sin(math.pi / n))
+    for a, p in zip(ac, pos):
+        h = math.radians(a.heading_deg)
+        to_centre = -p / np.hypot(*p)
+        np.testing.assert_allclose([math.cos(h), math.sin(h)], to_centre, atol=1e-12)
+        np.testing.assert_allclose(a.waypoints, [-p], atol=1e-9)
+        assert a.autopilot == "route" and a.speed == 230.0
+
+
+def test_ring_spacing_check_gives_minimum_radius():
+    r_min = ring_min_radius(32, 3000.0)
+    assert r_min == pytest.approx(3000.0 / math.sin(math.pi / 32))
+    build_aircraft(_ring(32, r_min), 0)  # exactly at the limit is fine
+    with pytest.raises(UserError) as info:
+        build_aircraft(_ring(32, 20000.0), 0)
+    msg = str(info.value)
+    assert "traffic.radius" in msg and f"{math.ceil(r_min)} m" in msg and "20000" in msg
+
+
+def test_ring_speed_spread_and_controlled():
+    sc = _ring(16, 40000.0, speed=230.0, speed_spread=20.0, controlled=3)
+    ac = build_aircraft(sc, np.random.default_rng(1))
+    speeds = np.array([a.speed for a in ac])
+    assert np.all((speeds >= 210.0) & (speeds <= 250.0)) and speeds.std() > 0
+    assert [a.controlled for a in ac] == [True] * 3 + [False] * 13
+
+
+def _random(count=40, sector=60000.0, r_safe=3000.0, aircraft=()):
+    return from_dict({"name": "s", "separation": {"r_safe": r_safe}, "aircraft": list(aircraft),
+                      "traffic": {"pattern": "random", "count": count, "sector": sector}})
+
+
+def test_random_traffic_respects_separation_and_sector():
+    hand = {"id": "me", "position": [0.0, 0.0], "heading_deg": 0.0, "speed": 200.0}
+    sc = _random(40, 60000.0, aircraft=[hand])
+    for seed in range(5):
+        ac = build_aircraft(sc, np.random.default_rng(seed))
+        assert len(ac) == 41 and ac[0].id == "me"
+        pos = np.array([a.position for a in ac])
+        d = np.hypot(*(pos[:, None] - pos[None]).transpose(2, 0, 1))
+        np.fill_diagonal(d, np.inf)
+        assert d.min() > 3000.0
+        assert np.all(np.abs(pos) <= 30000.0)
+        for a in ac[1:]:
+            (wx, wy), = a.waypoints
+            assert math.isclose(max(abs(wx), abs(wy)), 30000.0)  # on the sector's edge
+            assert math.hypot(wx - a.position[0], wy - a.position[1]) >= 30000.0
+            h = math.radians(a.heading_deg)
+            direction = np.array([wx - a.position[0], wy - a.position[1]])
+            np.testing.assert_allclose([math.cos(h), math.sin(h)], direction / np.hypot(*direction))
+
+
+def test_random_traffic_is_seeded():
+    sc = _random()
+    a = build_aircraft(sc, np.random.default_rng(3))
+    b = build_aircraft(sc, np.random.default_rng(3))
+    c = build_aircraft(sc, np.random.default_rng(4))
+    assert a == b and a != c
+
+
+def test_random_traffic_too_dense_is_a_user_error():
+    with pytest.raises(UserError, match="cannot place 100 aircraft"):
+        build_aircraft(_random(100, 10000.0), 0)
+
+
+def test_generated_id_clash_is_a_user_error():
+    hand = {"id": "ring00", "position": [0.0, 0.0], "heading_deg": 0.0, "speed": 200.0}
+    sc = from_dict({"name": "x", "aircraft": [hand],
+                    "traffic": {"pattern": "ring", "count": 4, "radius": 20000.0}})
+    with pytest.raises(UserError, match="ring00"):
+        build_aircraft(sc, 0)
+
+
+def test_build_does_not_share_hand_placed_objects():
+    sc = load("head_on")
+    ac = build_aircraft(sc, 0)
+    ac[0].waypoints.append((1.0, 1.0))
+    ac[0].speed = 1.0
+    assert sc.aircraft[0].speed == 230.0 and len(sc.aircraft[0].waypoints) == 1
