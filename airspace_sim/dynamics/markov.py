@@ -29,12 +29,14 @@ def validate_transition_matrix(Pi, name: str = "transition_matrix", atol: float 
         raise UserError(f"{name}: contains a non-finite value: {P.tolist()}")
     if np.any(P < 0):
         i, j = np.argwhere(P < 0)[0]
-        raise UserError(f"{name}: entry [{i}, {j}] = {P[i, j]} is negative")
+        raise UserError(f"{name}: entry [{i}, {j}] = {float(P[i, j]):.12g} is negative")
     sums = P.sum(axis=1)
     bad = np.flatnonzero(np.abs(sums - 1.0) > atol)
     if bad.size:
         i = bad[0]
-        raise UserError(f"{name}: row {i} sums to {sums[i]!r}, not 1 (row i = Pr(next mode | mode i))")
+        raise UserError(
+            f"{name}: row {i} sums to {float(sums[i]):.12g}, not 1 (row i = Pr(next mode | mode i))"
+        )
     return P
 
 
