@@ -12,7 +12,7 @@ turn); relative quantities are intruder minus ownship.
 """
 
 from airspace_sim.avoidance.bands import BandResult, band_search, resume_heading_change
-from airspace_sim.avoidance.escape import escape_angle, predicted_conflict
+from airspace_sim.avoidance.escape import escape_angle, escape_rotation, predicted_conflict
 from airspace_sim.avoidance.heading import tangent_heading_change
 from airspace_sim.avoidance.probability import conflict_probability, probability_inside_circle
 
@@ -21,6 +21,7 @@ __all__ = [
     "band_search",
     "conflict_probability",
     "escape_angle",
+    "escape_rotation",
     "predicted_conflict",
     "probability_inside_circle",
     "resume_heading_change",

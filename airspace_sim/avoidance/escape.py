@@ -62,14 +62,16 @@ def line_of_sight_angles(rel_position, rel_velocity, r_safe):
     v = np.asarray(rel_velocity, dtype=float)
     r = np.asarray(r_safe, dtype=float)
     dist = np.hypot(b[..., 0], b[..., 1])
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         ratio = np.where(dist > r, r / np.where(dist > 0, dist, 1.0), 1.0)
     beta = np.arcsin(np.clip(ratio, 0.0, 1.0))
     bo_x, bo_y = -b[..., 0], -b[..., 1]
     cross = v[..., 0] * bo_y - v[..., 1] * bo_x
     dot = v[..., 0] * bo_x + v[..., 1] * bo_y
     gamma = np.arctan2(cross, dot)
-    return beta, gamma
+    # atan2(±0, −0) is ±π: a zero vector has no direction, call it head-on (γ = 0)
+    degenerate = ((v[..., 0] == 0) & (v[..., 1] == 0)) | (dist == 0)
+    return beta, np.where(degenerate, 0.0, gamma)
 
 
 def predicted_conflict(rel_position, rel_velocity, r_safe, dt, horizon=3):
@@ -116,7 +118,7 @@ def escape_angle(rel_position, rel_velocity, r_safe, dt, horizon=3, max_angle=np
         Some ``|C_j| < r_safe``.
     """
     conflict = predicted_conflict(rel_position, rel_velocity, r_safe, dt, horizon)
-    theta = _unclamped_theta(rel_position, rel_velocity, r_safe)
+    theta = escape_rotation(rel_position, rel_velocity, r_safe)
     theta = np.clip(theta, -max_angle, max_angle)
     return np.where(conflict, theta, 0.0), conflict
 
@@ -132,11 +134,12 @@ def escape_side(gamma):
     return np.where(gamma < -HEAD_ON_TOLERANCE, 1.0, -1.0)
 
 
-def _unclamped_theta(rel_position, rel_velocity, r_safe):
-    """``θ = side·max(β − |γ|, 0)`` before clamping and before masking by the conflict flag.
+def escape_rotation(rel_position, rel_velocity, r_safe):
+    """Unclamped escape rotation ``θ = side·max(β − |γ|, 0)``, not masked by the conflict flag.
 
-    Head-on inside the tolerance uses the right-turn side with magnitude ``β + |γ|`` so that
-    the rotated velocity is still exactly tangent (it then makes ``β`` with ``BO`` on the
+    Shapes and units as in :func:`escape_angle`; returns radians, shape ``(...)``. Head-on
+    inside the tolerance uses the right-turn side with magnitude ``β + |γ|`` so that the
+    rotated velocity is still exactly tangent (it then makes ``β`` with ``BO`` on the
     clockwise side).
     """
     beta, gamma = line_of_sight_angles(rel_position, rel_velocity, r_safe)
