@@ -1,0 +1,157 @@
+"""World-frame exact heading changes: tangency, static-intruder limit, roots vs brute force."""
+
+import numpy as np
+import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
+
+from airspace_sim.avoidance import escape_rotation, tangent_heading_change
+from airspace_sim.avoidance.heading import (
+    range_at_time_heading_changes,
+    rotate,
+    tangent_direction,
+    tangent_heading_changes,
+    wrap_angle,
+)
+
+R = 3000.0
+
+
+def cross(a, b):
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def ray_distance(b, d):
+    """Distance from O of the ray B + t·d, t ≥ 0."""
+    t = max(-np.dot(b, d) / np.dot(d, d), 0.0)
+    return np.linalg.norm(b + t * d)
+
+
+vec = st.tuples(st.floats(-600, 600), st.floats(-600, 600)).map(np.array)
+position = st.tuples(st.floats(1.05, 8.0), st.floats(-np.pi, np.pi)).map(
+    lambda kb: kb[0] * R * np.array([np.cos(kb[1]), np.sin(kb[1])])
+)
+
+
+@settings(max_examples=300, deadline=None)
+@given(vec, vec, position, st.sampled_from([-1.0, 1.0]))
+def test_roots_put_relative_track_on_tangent(vo, vi, b, side):
+    assume(np.linalg.norm(vo) > 1.0)
+    roots = tangent_heading_changes(vo, vi, b, R, side)
+    assert roots.shape == (2,)
+    u = tangent_direction(b, R, side)
+    for psi in roots[~np.isnan(roots)]:
+        v_rel = vi - rotate(vo, psi)
+        assume(np.linalg.norm(v_rel) > 1e-3)
+        # on the tangent ray through the origin of velocity space, pointing forward
+        assert cross(u, v_rel) == pytest.approx(0.0, abs=1e-9 * np.linalg.norm(v_rel))
+        assert np.dot(u, v_rel) >= 0
+        assert ray_distance(b, v_rel) == pytest.approx(R, rel=1e-9)
+        assert -np.pi <= psi < np.pi
+
+
+@settings(max_examples=300, deadline=None)
+@given(vec, vec, position)
+def test_smallest_root_and_reachability_vs_brute_force(vo, vi, b):
+    assume(np.linalg.norm(vo) > 10.0)
+    psi, ok = tangent_heading_change(vo, vi, b, R)
+    # side the relative velocity already passes (or right on head-on)
+    v0 = vi - vo
+    side = -1.0 if cross(v0, -b) >= -1e-9 else 1.0
+    u = tangent_direction(b, R, side)
+    # brute force: sign changes of cross(u, v_rel(ψ)) on a fine grid, forward half only
+    grid = np.linspace(-np.pi, np.pi, 20001)
+    v_rel = vi - rotate(np.broadcast_to(vo, (grid.size, 2)), grid)
+    f = cross(np.broadcast_to(u, v_rel.shape), v_rel)
+    fwd = v_rel @ u > 0
+    change = (np.sign(f[:-1]) != np.sign(f[1:])) & fwd[:-1] & fwd[1:]
+    found = grid[:-1][change]
+    assert ok == (found.size > 0)
+    if not ok:
+        assert np.isnan(psi)
+        return
+    best = found[np.argmin(np.abs(found))]
+    assert abs(abs(psi) - abs(best)) <= 2 * (grid[1] - grid[0])
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.floats(20.0, 600.0), st.floats(-np.pi, np.pi), position, st.floats(-0.95, 0.95)
+)
+def test_static_intruder_heading_change_equals_paper_theta(speed, heading, b, frac):
+    # v_i = 0: v_rel = −v_o, and turning v_o by ψ turns v_rel by ψ, so ψ = θ (unclamped)
+    beta = np.arcsin(R / np.linalg.norm(b))
+    v_rel = speed * rotate(-b / np.linalg.norm(b), frac * beta)  # in conflict
+    vo = -v_rel
+    psi, ok = tangent_heading_change(vo, np.zeros(2), b, R)
+    theta = escape_rotation(b, v_rel, R)
+    assert ok
+    assert psi == pytest.approx(theta, abs=1e-9)
+
+
+def test_static_intruder_any_state_including_head_on():
+    b = np.array([0.0, 6000.0])
+    vo = np.array([0.0, 250.0])  # head-on: right turn
+    psi, ok = tangent_heading_change(vo, np.zeros(2), b, R)
+    assert ok and psi == pytest.approx(-np.arcsin(0.5), abs=1e-12)
+    assert psi == pytest.approx(escape_rotation(b, -vo, R), abs=1e-12)
+
+
+def test_unreachable_is_nan():
+    # slow ownship, fast intruder head-on: turning cannot move v_rel off the cone
+    vo = np.array([0.0, 10.0])
+    vi = np.array([0.0, -400.0])
+    b = np.array([0.0, 20000.0])
+    psi, ok = tangent_heading_change(vo, vi, b, R)
+    assert not ok and np.isnan(psi)
+    assert np.all(np.isnan(tangent_heading_changes(vo, vi, b, R, 1.0)))
+
+
+def test_world_frame_differs_from_theta_for_moving_intruder():
+    # head-on, equal speeds: v_rel = −2 v_o; the ownship must turn more than θ
+    vo = np.array([0.0, 250.0])
+    vi = np.array([0.0, -250.0])
+    b = np.array([0.0, 10000.0])
+    psi, ok = tangent_heading_change(vo, vi, b, R)
+    theta = escape_rotation(b, vi - vo, R)
+    assert ok and psi < theta < 0
+    v_rel = vi - rotate(vo, psi)
+    assert ray_distance(b, v_rel) == pytest.approx(R, rel=1e-9)
+    # closed form: rotating v_o by ψ turns v_i − v_o by ψ/2 when |v_i| = |v_o|
+    assert psi == pytest.approx(2 * theta, abs=1e-12)
+
+
+@settings(max_examples=200, deadline=None)
+@given(vec, vec, position, st.floats(-np.pi, np.pi))
+def test_rotation_invariance(vo, vi, b, alpha):
+    assume(np.linalg.norm(vo) > 1.0)
+    assume(abs(cross(vi - vo, -b)) > 1e-3 * np.linalg.norm(b) * np.linalg.norm(vi - vo))
+    p1, ok1 = tangent_heading_change(vo, vi, b, R)
+    p2, ok2 = tangent_heading_change(rotate(vo, alpha), rotate(vi, alpha), rotate(b, alpha), R)
+    assert ok1 == ok2
+    if ok1:
+        assert wrap_angle(p2 - p1) == pytest.approx(0.0, abs=1e-8)
+
+
+@settings(max_examples=200, deadline=None)
+@given(vec, vec, position, st.floats(1.0, 300.0))
+def test_range_at_time_roots(vo, vi, b, t):
+    assume(np.linalg.norm(vo) > 1.0)
+    roots = range_at_time_heading_changes(vo, vi, b, R, t)
+    for psi in roots[~np.isnan(roots)]:
+        p = b + t * (vi - rotate(vo, psi))
+        assert np.linalg.norm(p) == pytest.approx(R, rel=1e-8)
+
+
+def test_vectorised_shapes():
+    rng = np.random.default_rng(1)
+    vo = rng.uniform(-300, 300, (4, 3, 2))
+    vi = rng.uniform(-300, 300, (4, 3, 2))
+    b = rng.uniform(-20000, 20000, (4, 3, 2))
+    psi, ok = tangent_heading_change(vo, vi, b, R)
+    assert psi.shape == ok.shape == (4, 3)
+    for i in range(4):
+        for j in range(3):
+            p, o = tangent_heading_change(vo[i, j], vi[i, j], b[i, j], R)
+            assert o == ok[i, j]
+            assert (np.isnan(p) and np.isnan(psi[i, j])) or p == psi[i, j]
