@@ -1,0 +1,159 @@
+"""Batched linear Kalman filter: B independent trackers sharing one linear-Gaussian model.
+
+The single-model baseline for the IMM (a constant-velocity filter is the classic one) and
+the ``kalman`` tracker of the world. Same conventions as :class:`~airspace_sim.tracking.IMM`
+(``docs/dev/CONTRACTS.md``): every array has the tracker axis first, one :meth:`step` is a
+predict followed by an update, a NaN measurement row means "no measurement: predict only".
+Everything is numpy over the batch axis (``matmul``/``einsum``); there is no Python loop
+over trackers.
+
+Model (Bar-Shalom, Li & Kirubarajan 2001, §5.2)::
+
+    x(k) = F x(k−1) + u + w,   w ~ N(0, Q)
+    z(k) = H x(k) + v,         v ~ N(0, R)
+
+Update in Joseph form, ``P = (I − KH) P (I − KH)ᵀ + K R Kᵀ``, which keeps P symmetric and
+positive semi-definite under round-off (the same form filterpy 2.0.0 uses).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from airspace_sim.errors import UserError
+
+
+def _sym(P: np.ndarray) -> np.ndarray:
+    return 0.5 * (P + np.swapaxes(P, -1, -2))
+
+
+class KalmanFilter:
+    """B Kalman filters with a shared model, stepped together.
+
+    Parameters
+    ----------
+    transition : (n, n) state transition F.
+    process_noise : (n, n) process noise covariance Q.
+    measurement_matrix : (m, n) H.
+    measurement_noise : (m, m) R.
+    x0 : (B, n) initial estimates.
+    P0 : (B, n, n) initial covariances (or (n, n), shared).
+    offset : (n,) optional additive term u in the prediction.
+
+    Attributes
+    ----------
+    x : (B, n) posterior estimates; P : (B, n, n) posterior covariances.
+    nis : (B,) last step's normalised innovation squared ``νᵀ S⁻¹ ν``, NaN where there was
+        no measurement.
+    mu, x_modes, P_modes : the single-mode view of the IMM attributes ((B, 1), (B, 1, n),
+        (B, 1, n, n)), so the filter can stand in where an IMM is expected.
+    """
+
+    def __init__(self, transition, process_noise, measurement_matrix, measurement_noise, x0, P0, offset=None):
+        F = np.asarray(transition, dtype=float)
+        n = F.shape[-1]
+        if F.shape != (n, n):
+            raise UserError(f"KalmanFilter: transition must be (n, n), got {F.shape}")
+        Q = np.asarray(process_noise, dtype=float)
+        H = np.asarray(measurement_matrix, dtype=float)
+        R = np.asarray(measurement_noise, dtype=float)
+        m = H.shape[0] if H.ndim == 2 else -1
+        if Q.shape != (n, n) or H.shape != (m, n) or R.shape != (m, m):
+            raise UserError(
+                f"KalmanFilter: shapes Q {Q.shape}, H {H.shape}, R {R.shape} do not fit n = {n}"
+            )
+        self.F, self.Q, self.H, self.R = F, Q, H, R
+        self.u = np.zeros(n) if offset is None else np.asarray(offset, dtype=float).reshape(n)
+        self.n, self.m = n, m
+        self.x = np.empty((0, n))
+        self.P = np.empty((0, n, n))
+        self.nis = np.empty(0)
+        self.append(x0, P0)
+
+    # --- batch management -------------------------------------------------------------
+    @property
+    def B(self) -> int:
+        """Number of trackers."""
+        return self.x.shape[0]
+
+    def append(self, x0, P0, mu0=None) -> np.ndarray:
+        """Add trackers at the end; returns their row indices. ``mu0`` is ignored (IMM API)."""
+        x0 = np.asarray(x0, dtype=float)
+        if x0.ndim == 1:
+            x0 = x0[None]
+        P0 = np.asarray(P0, dtype=float)
+        if x0.ndim != 2 or x0.shape[1] != self.n:
+            raise UserError(f"KalmanFilter: x0 must be (B, {self.n}), got {x0.shape}")
+        P0 = np.broadcast_to(P0, (x0.shape[0], self.n, self.n))
+        start = self.B
+        self.x = np.concatenate([self.x, x0])
+        self.P = np.concatenate([self.P, P0])
+        self.nis = np.concatenate([self.nis, np.full(x0.shape[0], np.nan)])
+        return np.arange(start, self.B)
+
+    def remove(self, indices) -> None:
+        """Drop trackers ``indices``; the others keep their order."""
+        keep = np.ones(self.B, dtype=bool)
+        keep[np.asarray(indices, dtype=np.int64)] = False
+        self.x, self.P, self.nis = self.x[keep], self.P[keep], self.nis[keep]
+
+    # --- filtering ----------------------------------------------------------------------
+    def predict(self) -> None:
+        """Time update only: ``x ← F x + u``, ``P ← F P Fᵀ + Q``."""
+        self.x = self.x @ self.F.T + self.u
+        self.P = _sym(self.F @ self.P @ self.F.T + self.Q)
+
+    def update(self, z) -> None:
+        """Measurement update for rows of ``z`` (B, m) that are not NaN."""
+        z = np.asarray(z, dtype=float).reshape(self.B, self.m)
+        has = ~np.any(np.isnan(z), axis=1)
+        self.nis = np.full(self.B, np.nan)
+        if not has.any():
+            return
+        idx = np.flatnonzero(has) if not has.all() else slice(None)
+        x, P, H, R = self.x[idx], self.P[idx], self.H, self.R
+        nu = z[idx] - x @ H.T  # (b, m)
+        PHt = P @ H.T  # (b, n, m)
+        S = _sym(H @ PHt + R)  # (b, m, m)
+        # K = P Hᵀ S⁻¹ = (S⁻¹ H P)ᵀ since S and P are symmetric
+        K = np.swapaxes(np.linalg.solve(S, np.swapaxes(PHt, -1, -2)), -1, -2)  # (b, n, m)
+        self.nis[idx] = np.einsum("bi,bi->b", nu, np.linalg.solve(S, nu[..., None])[..., 0])
+        x = x + np.einsum("bij,bj->bi", K, nu)
+        IKH = np.eye(self.n) - K @ H
+        P = IKH @ P @ np.swapaxes(IKH, -1, -2) + K @ R @ np.swapaxes(K, -1, -2)
+        self.x[idx], self.P[idx] = x, _sym(P)
+
+    def step(self, z) -> None:
+        """One cycle: predict, then update with ``z`` (B, m); a NaN row predicts only."""
+        self.predict()
+        self.update(z)
+
+    def predict_ahead(self, steps: int) -> tuple[np.ndarray, np.ndarray]:
+        """Predictions 1..``steps`` steps ahead without changing the filter:
+        (B, steps, n) means and (B, steps, n, n) covariances."""
+        xs = np.empty((self.B, steps, self.n))
+        Ps = np.empty((self.B, steps, self.n, self.n))
+        x, P = self.x, self.P
+        for s in range(steps):
+            x = x @ self.F.T + self.u
+            P = _sym(self.F @ P @ self.F.T + self.Q)
+            xs[:, s], Ps[:, s] = x, P
+        return xs, Ps
+
+    # --- IMM-shaped view ----------------------------------------------------------------
+    @property
+    def mu(self) -> np.ndarray:
+        return np.ones((self.B, 1))
+
+    @property
+    def x_modes(self) -> np.ndarray:
+        return self.x[:, None]
+
+    @property
+    def P_modes(self) -> np.ndarray:
+        return self.P[:, None]
+
+    def predict_modes(self, steps: int) -> tuple[np.ndarray, np.ndarray]:
+        """As :meth:`IMM.predict_modes` with one mode: (B, 1, steps, n), (B, 1, steps, n, n)."""
+        xs, Ps = self.predict_ahead(steps)
+        return xs[:, None], Ps[:, None]
