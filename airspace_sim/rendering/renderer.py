@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import math
 import os
+import sys
+import warnings
 
 import numpy as np
 
@@ -113,6 +115,7 @@ class Renderer:
         self._big = pygame.font.Font(None, 22)
         self._surface = pygame.Surface((self.width, self.height))
         self._window = None
+        self._warned_no_display = False
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -402,6 +405,11 @@ class Renderer:
         """Display ``frame`` in a window (needs a display; used by render_mode="human")."""
         frame = np.asarray(frame)
         if self._window is None:
+            if not has_display():
+                if not self._warned_no_display:
+                    warnings.warn("render_mode='human': no display found, frames are not shown")
+                    self._warned_no_display = True
+                return
             pygame.display.init()
             pygame.display.set_caption("airspace_sim")
             self._window = pygame.display.set_mode((frame.shape[1], frame.shape[0]))
@@ -415,6 +423,13 @@ class Renderer:
         if self._window is not None:
             pygame.display.quit()
             self._window = None
+
+
+def has_display() -> bool:
+    """Whether a window can be shown (on Linux: an X11 or Wayland display is set)."""
+    if sys.platform.startswith("linux") or "bsd" in sys.platform:
+        return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+    return True
 
 
 def _visible_box(t: ViewTransform):

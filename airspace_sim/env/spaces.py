@@ -1,0 +1,252 @@
+"""Observation and action spaces of the PettingZoo env, and the observation encoder.
+
+Observation: one flat ``float32`` :class:`gymnasium.spaces.Box` per agent, every entry
+normalised and clipped to finite bounds (mostly [-1, 1], flags and probabilities [0, 1]).
+Layout (see :meth:`ObservationLayout.names` for every entry's name):
+
+``own`` block (12 entries), the ownship's true state:
+
+    0  speed / v_ref                          [0, 2]     v_ref = 300 m/s
+    1  sin(heading)                           [-1, 1]    heading CCW from east
+    2  cos(heading)                           [-1, 1]
+    3  turn rate / max turn rate              [-1, 1]    last step's
+    4  cross-track error / (10 r_safe)        [-1, 1]    + left of the route leg
+    5  sin(bearing to waypoint - heading)     [-1, 1]    0 with no route
+    6  cos(bearing to waypoint - heading)     [-1, 1]    1 with no route
+    7  distance to waypoint / (2 range)       [0, 1]     range = sensor range
+    8  has a waypoint ahead                   {0, 1}
+    9  resolver advice / pi                   [-1, 1]    heading change, CCW +
+   10  conflict alert                         {0, 1}
+   11  in loss of separation                  {0, 1}
+
+then ``K`` intruder rows (nearest first by estimated range), each ``11 + M`` entries, the
+ownship's **tracker** estimates in the ownship's body frame (x forward, y left):
+
+    0  mask: 1 for a track, 0 for padding (the rest of a padding row is 0)
+    1  rel. x / range,   2  rel. y / range                        [-1, 1]
+    3  rel. vx / (2 v_ref),   4  rel. vy / (2 v_ref)              [-1, 1]
+    5  estimated range / range                                    [0, 1]
+    6  σx / r_safe,   7  σy / r_safe                              [0, 1]  position std devs
+    8  correlation of the position errors ρxy                     [-1, 1]
+    9  time to closest approach / lookahead                       [-1, 1]
+   10  miss distance at closest approach / (2 r_safe)             [0, 1]
+   11.. mode probabilities μ (M of them: straight, left, right)    [0, 1]
+
+Action: heading-rate command in rad/s, ``Box(-ω_max, ω_max, (1,), float32)`` with ω_max
+the aircraft's turn-rate limit; or with ``discrete_actions`` a ``Discrete(5)`` over
+``DISCRETE_LEVELS`` × ω_max: hard left, left, straight, right, hard right (left = CCW = +).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from gymnasium import spaces
+
+from airspace_sim.errors import UserError
+
+V_REF = 300.0  #: m/s, speed normalisation
+#: discrete action index -> fraction of the turn-rate limit (CCW +): hard left .. hard right
+DISCRETE_LEVELS = (1.0, 0.5, 0.0, -0.5, -1.0)
+DISCRETE_NAMES = ("hard left", "left", "straight", "right", "hard right")
+
+OWN_NAMES = (
+    "speed",
+    "sin_heading",
+    "cos_heading",
+    "turn_rate",
+    "cross_track",
+    "sin_bearing_to_waypoint",
+    "cos_bearing_to_waypoint",
+    "distance_to_waypoint",
+    "has_waypoint",
+    "advice",
+    "conflict",
+    "in_los",
+)
+OWN_LOW = (0, -1, -1, -1, -1, -1, -1, 0, 0, -1, 0, 0)
+OWN_HIGH = (2, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1)
+INTRUDER_NAMES = (
+    "mask",
+    "rel_x",
+    "rel_y",
+    "rel_vx",
+    "rel_vy",
+    "range",
+    "sigma_x",
+    "sigma_y",
+    "rho_xy",
+    "tcpa",
+    "dcpa",
+)
+INTRUDER_LOW = (0, -1, -1, -1, -1, 0, 0, 0, -1, -1, 0)
+INTRUDER_HIGH = (1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1)
+
+
+@dataclass(frozen=True)
+class ObservationLayout:
+    """Sizes and scales of the flat observation vector."""
+
+    n_intruders: int  #: K
+    n_modes: int  #: M
+    sensor_range: float  #: m
+    r_safe: float  #: m
+    lookahead: float  #: s
+
+    @property
+    def own_size(self) -> int:
+        return len(OWN_NAMES)
+
+    @property
+    def intruder_size(self) -> int:
+        return len(INTRUDER_NAMES) + self.n_modes
+
+    @property
+    def size(self) -> int:
+        return self.own_size + self.n_intruders * self.intruder_size
+
+    def names(self) -> list[str]:
+        """Name of every entry, e.g. ``own.speed``, ``intruder0.rel_x``, ``intruder0.mu1``."""
+        out = [f"own.{n}" for n in OWN_NAMES]
+        for k in range(self.n_intruders):
+            out += [f"intruder{k}.{n}" for n in INTRUDER_NAMES]
+            out += [f"intruder{k}.mu{m}" for m in range(self.n_modes)]
+        return out
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        ilow = INTRUDER_LOW + (0,) * self.n_modes
+        ihigh = INTRUDER_HIGH + (1,) * self.n_modes
+        low = np.array(OWN_LOW + ilow * self.n_intruders, dtype=np.float32)
+        high = np.array(OWN_HIGH + ihigh * self.n_intruders, dtype=np.float32)
+        return low, high
+
+    def space(self) -> spaces.Box:
+        low, high = self.bounds()
+        return spaces.Box(low, high, dtype=np.float32)
+
+    def intruder_block(self, obs: np.ndarray) -> np.ndarray:
+        """View of ``obs`` (..., size) as (..., K, 11 + M) intruder rows."""
+        return obs[..., self.own_size :].reshape(
+            obs.shape[:-1] + (self.n_intruders, self.intruder_size)
+        )
+
+
+def action_space(max_turn_rate: float, discrete: bool) -> spaces.Space:
+    """The action space of an aircraft with turn-rate limit ``max_turn_rate`` rad/s."""
+    if discrete:
+        return spaces.Discrete(len(DISCRETE_LEVELS))
+    w = np.float32(max_turn_rate)
+    return spaces.Box(-w, w, shape=(1,), dtype=np.float32)
+
+
+def decode_action(agent: str, action, max_turn_rate: float, discrete: bool) -> float:
+    """Heading rate in rad/s from one agent's action; :class:`UserError` if malformed.
+
+    Continuous actions are clipped to ±``max_turn_rate``; NaN or inf is an error.
+    """
+    if discrete:
+        try:
+            idx = int(np.asarray(action).reshape(()))
+            bad = idx != np.asarray(action).reshape(()) or not 0 <= idx < len(DISCRETE_LEVELS)
+        except (TypeError, ValueError):
+            bad = True
+        if bad:
+            raise UserError(
+                f"action for agent {agent!r}: expected an integer in 0..{len(DISCRETE_LEVELS) - 1}"
+                f" ({', '.join(DISCRETE_NAMES)}), got {action!r}"
+            )
+        return DISCRETE_LEVELS[idx] * max_turn_rate
+    try:
+        a = np.asarray(action, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise UserError(
+            f"action for agent {agent!r}: expected a heading rate in rad/s, got {action!r}"
+        ) from None
+    if a.size != 1:
+        raise UserError(
+            f"action for agent {agent!r}: expected one heading rate in rad/s, got shape "
+            f"{np.shape(action)}"
+        )
+    value = float(a[0])
+    if not math.isfinite(value):
+        raise UserError(
+            f"action for agent {agent!r}: heading rate is {value} (expected a finite number "
+            "in rad/s)"
+        )
+    return float(np.clip(value, -max_turn_rate, max_turn_rate))
+
+
+def _rotate(v: np.ndarray, heading: float) -> np.ndarray:
+    """World-frame vectors (..., 2) -> body frame (x forward, y left) of ``heading``."""
+    c, s = math.cos(heading), math.sin(heading)
+    return np.stack([c * v[..., 0] + s * v[..., 1], -s * v[..., 0] + c * v[..., 1]], axis=-1)
+
+
+def encode_intruders(
+    layout: ObservationLayout,
+    own_pos: np.ndarray,
+    own_vel: np.ndarray,
+    heading: float,
+    x: np.ndarray,
+    P: np.ndarray,
+    mu: np.ndarray,
+) -> np.ndarray:
+    """The K intruder rows (K, 11 + M) from one ownship's tracks ``x`` (T, 5), ``P``, ``mu``.
+
+    Tracks with non-finite estimates are ignored; the nearest K by estimated range are kept.
+    """
+    K, F, M = layout.n_intruders, layout.intruder_size, layout.n_modes
+    rows = np.zeros((K, F), dtype=np.float64)
+    x = np.asarray(x, dtype=np.float64).reshape(-1, 5)
+    if len(x) == 0 or K == 0:
+        return rows
+    ok = np.all(np.isfinite(x[:, :4]), axis=1)
+    x, P, mu = x[ok], np.asarray(P)[ok], np.asarray(mu)[ok]
+    if len(x) == 0:
+        return rows
+    rel_p = np.stack([x[:, 0] - own_pos[0], x[:, 2] - own_pos[1]], axis=1)
+    rel_v = np.stack([x[:, 1] - own_vel[0], x[:, 3] - own_vel[1]], axis=1)
+    dist = np.hypot(rel_p[:, 0], rel_p[:, 1])
+    order = np.argsort(dist, kind="stable")[:K]
+    n = len(order)
+    rp = _rotate(rel_p[order], heading)
+    rv = _rotate(rel_v[order], heading)
+    d = dist[order]
+    # position covariance in the body frame
+    cov = P[order][:, [0, 2]][:, :, [0, 2]]
+    c, s = math.cos(heading), math.sin(heading)
+    R = np.array([[c, s], [-s, c]])
+    cov_b = R @ cov @ R.T
+    sx = np.sqrt(np.clip(cov_b[:, 0, 0], 0, None))
+    sy = np.sqrt(np.clip(cov_b[:, 1, 1], 0, None))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rho = np.where(sx * sy > 0, cov_b[:, 0, 1] / (sx * sy), 0.0)
+    # closest point of approach on straight lines
+    vv = np.sum(rv * rv, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        tcpa = np.where(vv > 1e-9, -np.sum(rp * rv, axis=1) / vv, 0.0)
+    dcpa = np.hypot(*(rp + rv * np.clip(tcpa, 0, None)[:, None]).T)
+    rng_, r_safe = layout.sensor_range, layout.r_safe
+    rows[:n, 0] = 1.0
+    rows[:n, 1:3] = rp / rng_
+    rows[:n, 3:5] = rv / (2 * V_REF)
+    rows[:n, 5] = d / rng_
+    rows[:n, 6] = sx / r_safe
+    rows[:n, 7] = sy / r_safe
+    rows[:n, 8] = rho
+    rows[:n, 9] = tcpa / layout.lookahead
+    rows[:n, 10] = dcpa / (2 * r_safe)
+    if M:
+        m = np.asarray(mu, dtype=np.float64)[order].reshape(n, -1)[:, :M]
+        rows[:n, 11 : 11 + m.shape[1]] = m
+    return rows
+
+
+def finish(layout: ObservationLayout, own: np.ndarray, intruders: np.ndarray) -> np.ndarray:
+    """Concatenate, replace NaN by 0 and clip into the space's bounds (float32)."""
+    low, high = layout.bounds()
+    obs = np.concatenate([np.asarray(own, np.float64), np.asarray(intruders).reshape(-1)])
+    obs = np.nan_to_num(obs, nan=0.0, posinf=np.inf, neginf=-np.inf)
+    return np.clip(obs, low, high).astype(np.float32)
