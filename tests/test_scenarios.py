@@ -230,6 +230,7 @@ def test_override_list_index_and_list_value():
         ("traffic.count=abc", "--set traffic.count: expected a non-negative integer, got 'abc'"),
         ("traffic.count=-3", "--set traffic.count: expected a non-negative integer, got -3"),
         ("traffic.cout=3", "--set traffic.cout: unknown key"),
+        ("trafic.count=3", "--set trafic: unknown key"),
         ("sensor.detection_probability=2", "--set sensor.detection_probability: expected a probability"),
         ("aircraft[5].speed=3", "--set aircraft[5].speed: index 5 out of range"),
         ("dt.x=3", "--set dt.x: dt is not a table"),

@@ -58,18 +58,23 @@ def parse(item: str) -> tuple[list[str | int], Any]:
 
 
 def apply_overrides(data: dict, overrides: Iterable[str]) -> list[str]:
-    """Apply ``overrides`` to ``data`` in place; return the normalised dotted keys set."""
+    """Apply ``overrides`` to ``data`` in place.
+
+    Returns the normalised dotted keys that were set, and those of tables the overrides
+    created on the way (so that an error about them is reported as ``--set``).
+    """
     if isinstance(overrides, str):
         overrides = [overrides]
-    done = []
+    done: list[str] = []
     for item in overrides:
         parts, value = parse(item)
-        _assign(data, parts, value)
+        done.extend(_assign(data, parts, value))
         done.append(format_key(parts))
     return done
 
 
-def _assign(data: dict, parts: list[str | int], value: Any) -> None:
+def _assign(data: dict, parts: list[str | int], value: Any) -> list[str]:
+    created = []
     node: Any = data
     for i, part in enumerate(parts):
         last = i == len(parts) - 1
@@ -85,7 +90,8 @@ def _assign(data: dict, parts: list[str | int], value: Any) -> None:
             raise UserError(f"--set {format_key(parts)}: {format_key(parts[:i])} is not a table")
         if last:
             node[part] = value
-            return
+            return created
         if isinstance(node, dict) and part not in node:
             node[part] = [] if isinstance(parts[i + 1], int) else {}
+            created.append(format_key(parts[: i + 1]))
         node = node[part]

@@ -1,0 +1,344 @@
+"""``airspace-sim run SCENARIO``: step a scenario's world, print its metrics, render frames.
+
+Examples::
+
+    airspace-sim run --list
+    airspace-sim run head_on
+    airspace-sim run ring --set traffic.count=64 --set traffic.radius=65000 --steps 300
+    airspace-sim run demo --render out/demo --gif           # PNG frames + out/demo/run.gif
+    airspace-sim run dense_random --json out/dense.json --seed 3
+    airspace-sim run ring --checkpoint out/ring.pkl --steps 100   # run 100 steps, save
+    airspace-sim run ring --resume out/ring.pkl --steps 100       # 100 more from there
+
+The scenario is a name from the repository's ``scenarios/`` folder or a path to a TOML
+file. ``--set key=value`` changes any scenario key (dotted, e.g. ``sensor.sigma=30``,
+``aircraft[0].speed=250``) before validation. The summary (scenario, seed, steps, metrics)
+is printed as a table and written as ``summary.json`` into the render folder and/or to
+``--json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+from airspace_sim.errors import UserError
+
+HELP = "run a scenario: step the world, print metrics, optionally render frames"
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
+    return value
+
+
+def _non_negative_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a non-negative integer, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a non-negative integer, got {value}")
+    return value
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT in pixels, e.g. 800x800, got {text!r}") from None
+    if w < 64 or h < 64:
+        raise argparse.ArgumentTypeError(f"expected at least 64x64 pixels, got {text!r}")
+    return w, h
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("scenario", nargs="?", help="scenario name (see --list) or path to a .toml file")
+    parser.add_argument("--list", action="store_true", help="list the shipped scenarios and exit")
+    parser.add_argument("--steps", type=_positive_int, help="world steps to run (default: the scenario's duration / dt)")
+    parser.add_argument("--seed", type=_non_negative_int, help="random seed (default: the scenario's seed)")
+    parser.add_argument(
+        "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+        help="override a scenario key, e.g. --set traffic.count=64 (repeatable; value parsed as TOML)",
+    )
+    parser.add_argument("--render", metavar="DIR", help="write a PNG per step (frame_00000.png, ...) and summary.json into DIR")
+    video = parser.add_mutually_exclusive_group()
+    video.add_argument("--gif", action="store_true", help="also write DIR/run.gif (needs --render)")
+    video.add_argument("--mp4", action="store_true", help="also write DIR/run.mp4 (needs --render and imageio-ffmpeg)")
+    parser.add_argument("--every", type=_positive_int, default=1, metavar="N", help="render every N-th step (default 1)")
+    parser.add_argument("--size", type=_size, default=(800, 800), metavar="WxH", help="frame size in pixels (default 800x800)")
+    parser.add_argument("--fps", type=float, default=10.0, help="frames per second of the GIF/MP4 (default 10)")
+    parser.add_argument("--json", metavar="PATH", help="write the summary as JSON to PATH")
+    parser.add_argument("--checkpoint", metavar="PATH", help="save the world to PATH at the end (and on Ctrl-C) to resume later")
+    parser.add_argument("--resume", metavar="PATH", help="continue a run saved with --checkpoint (the scenario argument is optional)")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar and no table")
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def jsonable(obj):
+    """Metrics → plain JSON values (numpy scalars and arrays, non-finite floats → null)."""
+    try:
+        import numpy as np
+    except ImportError:  # pragma: no cover
+        np = None
+    if isinstance(obj, dict):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [jsonable(v) for v in obj]
+    if np is not None and isinstance(obj, np.ndarray):
+        return jsonable(obj.tolist())
+    if np is not None and isinstance(obj, np.generic):
+        return jsonable(obj.item())
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if obj is None or isinstance(obj, (bool, int, str)):
+        return obj
+    return str(obj)
+
+
+def _flatten(d: dict, prefix: str = "") -> list[tuple[str, object]]:
+    rows = []
+    for k, v in d.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, dict):
+            rows.extend(_flatten(v, key + "."))
+        else:
+            rows.append((key, v))
+    return rows
+
+
+def _fmt(v) -> str:
+    if isinstance(v, bool) or v is None:
+        return str(v).lower() if isinstance(v, bool) else "-"
+    if isinstance(v, float):
+        if v == int(v) and abs(v) < 1e15:
+            return f"{int(v)}" if abs(v) >= 1e4 else f"{v:g}"
+        return f"{v:.4g}"
+    if isinstance(v, list):
+        text = ", ".join(_fmt(x) for x in v[:8]) + (", ..." if len(v) > 8 else "")
+        return f"[{text}]"
+    return str(v)
+
+
+def format_table(summary: dict) -> str:
+    """The summary as an aligned two-column table (metrics flattened with dotted keys)."""
+    head = [
+        ("scenario", summary["scenario"]),
+        ("seed", summary["seed"]),
+        ("steps", summary["steps"]),
+        ("simulated time (s)", summary["simulated_time"]),
+        ("wall time (s)", summary["wall_time"]),
+        ("steps per second", summary["steps_per_second"]),
+    ]
+    rows = [(k, _fmt(v)) for k, v in head]
+    metrics = _flatten(summary.get("metrics") or {})
+    width = max(len(k) for k, _ in rows + [(m, 0) for m, _ in metrics] + [("metric", 0)])
+    lines = [f"{k:<{width}}  {v}" for k, v in rows]
+    if metrics:
+        lines += ["", f"{'metric':<{width}}  value", f"{'-' * width}  {'-' * 12}"]
+        lines += [f"{k:<{width}}  {_fmt(v)}" for k, v in metrics]
+    return "\n".join(lines)
+
+
+def _write_json(path: Path, summary: dict) -> None:
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(summary, indent=2) + "\n")
+    except OSError as exc:
+        raise UserError(f"cannot write {path}: {exc}") from None
+
+
+class _Frames:
+    """Numbered PNG frames in a folder, plus an optional GIF or MP4 assembled from them."""
+
+    def __init__(self, directory: Path, size, video: str | None, fps: float):
+        from airspace_sim.rendering import Renderer
+
+        self.directory = directory
+        try:
+            directory.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise UserError(f"--render {directory}: cannot create folder: {exc}") from None
+        for old in directory.glob("frame_*.png"):  # a shorter rerun must not leave stale frames
+            old.unlink()
+        self.renderer = Renderer(*size)
+        self.video = video
+        self.fps = fps
+        self.paths: list[Path] = []
+        self._mp4 = None
+        if video == "mp4":
+            try:
+                import imageio.v2 as iio2
+
+                self._mp4 = iio2.get_writer(directory / "run.mp4", fps=fps, macro_block_size=1)
+            except (ImportError, ValueError, RuntimeError) as exc:
+                raise UserError(f"--mp4 needs the ffmpeg plugin of imageio (pip install imageio-ffmpeg): {exc}") from None
+
+    def add(self, snapshot: dict) -> None:
+        import imageio.v3 as iio
+
+        frame = self.renderer.render(snapshot)
+        path = self.directory / f"frame_{len(self.paths):05d}.png"
+        iio.imwrite(path, frame)
+        self.paths.append(path)
+        if self._mp4 is not None:
+            self._mp4.append_data(frame)
+
+    def close(self) -> Path | None:
+        if self._mp4 is not None:
+            self._mp4.close()
+            return self.directory / "run.mp4"
+        if self.video == "gif" and self.paths:
+            from PIL import Image
+
+            out = self.directory / "run.gif"
+            first = Image.open(self.paths[0])
+            # Frames are read back one at a time: memory stays at one frame, not the run.
+            first.save(
+                out, save_all=True, append_images=(Image.open(p) for p in self.paths[1:]),
+                duration=int(round(1000 / self.fps)), loop=0,
+            )
+            return out
+        return None
+
+
+# --------------------------------------------------------------------------- checkpoints
+
+
+def save_checkpoint(path: Path, world, meta: dict) -> None:
+    """Pickle the world (and how it was made) to ``path`` atomically."""
+    import pickle
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        with open(tmp, "wb") as f:
+            pickle.dump({"format": 1, "meta": meta, "world": world}, f, protocol=pickle.HIGHEST_PROTOCOL)
+    except (TypeError, AttributeError, pickle.PicklingError) as exc:
+        tmp.unlink(missing_ok=True)
+        raise UserError(f"--checkpoint: this world cannot be saved ({exc})") from None
+    tmp.replace(path)
+
+
+def load_checkpoint(path: Path) -> tuple[object, dict]:
+    import pickle
+
+    try:
+        with open(path, "rb") as f:
+            data = pickle.load(f)
+    except FileNotFoundError:
+        raise UserError(f"--resume {path}: no such file") from None
+    except (OSError, pickle.UnpicklingError, EOFError, AttributeError, ImportError) as exc:
+        raise UserError(f"--resume {path}: not a readable checkpoint ({exc})") from None
+    if not isinstance(data, dict) or data.get("format") != 1:
+        raise UserError(f"--resume {path}: not an airspace-sim checkpoint")
+    return data["world"], data["meta"]
+
+
+# --------------------------------------------------------------------------- command
+
+
+def run(args) -> int:
+    from airspace_sim import scenarios
+
+    if args.list:
+        for name in scenarios.available():
+            sc = scenarios.load(name)
+            print(f"{name:<18} {sc.description}")
+        return 0
+    if (args.gif or args.mp4) and not args.render:
+        raise UserError(f"--{'gif' if args.gif else 'mp4'} needs --render DIR (the frames go there)")
+    if args.fps <= 0:
+        raise UserError(f"--fps: expected a positive number, got {args.fps:g}")
+
+    if args.resume:
+        if args.overrides or args.seed is not None:
+            raise UserError("--resume continues a saved run: --set and --seed cannot change it")
+        world, meta = load_checkpoint(Path(args.resume))
+        if args.scenario and args.scenario not in (meta["scenario"], meta.get("source")):
+            raise UserError(f"--resume {args.resume}: it holds scenario {meta['scenario']!r}, not {args.scenario!r}")
+        name, source, seed, overrides = meta["scenario"], meta["source"], meta["seed"], meta["overrides"]
+        remaining = max(0, meta["total_steps"] - world.step_count)
+        if not args.steps and not remaining:
+            raise UserError(f"--resume {args.resume}: that run is complete; give --steps N to run further")
+        steps = args.steps or remaining
+    else:
+        if not args.scenario:
+            raise UserError("missing SCENARIO (a name from `airspace-sim run --list` or a .toml path)")
+        sc = scenarios.load(args.scenario, args.overrides)
+        seed = sc.seed if args.seed is None else args.seed
+        steps = args.steps or sc.n_steps
+        name, source, overrides = sc.name, sc.source, list(args.overrides)
+        from airspace_sim.world import World
+
+        world = World(sc, seed=seed)
+
+    frames = None
+    if args.render:
+        frames = _Frames(Path(args.render), args.size, "gif" if args.gif else "mp4" if args.mp4 else None, args.fps)
+        frames.add(world.snapshot())
+
+    from tqdm import tqdm
+
+    start_step = world.step_count
+    interrupted = False
+    t0 = time.perf_counter()
+    bar = tqdm(total=steps, unit="step", desc=name, disable=args.quiet or not sys.stderr.isatty(),
+               file=sys.stderr, leave=False)
+    try:
+        for k in range(steps):
+            world.step()
+            if frames is not None and ((k + 1) % args.every == 0 or k + 1 == steps):
+                frames.add(world.snapshot())
+            bar.update(1)
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        bar.close()
+    wall = time.perf_counter() - t0
+    done = world.step_count - start_step
+
+    video = frames.close() if frames is not None else None
+    summary = {
+        "scenario": name,
+        "source": source,
+        "seed": seed,
+        "overrides": overrides,
+        "steps": done,
+        "total_steps": world.step_count,
+        "dt": float(world.dt),
+        "simulated_time": float(world.time),
+        "wall_time": round(wall, 3),
+        "steps_per_second": round(done / wall, 1) if wall > 0 else None,
+        "interrupted": interrupted,
+        "metrics": jsonable(world.metrics()),
+    }
+    if frames is not None:
+        summary["frames"] = len(frames.paths)
+        if video is not None:
+            summary["video"] = str(video)
+        _write_json(frames.directory / "summary.json", summary)
+    if args.json:
+        _write_json(Path(args.json), summary)
+    if args.checkpoint:
+        meta = {"scenario": name, "source": source, "seed": seed, "overrides": overrides,
+                "total_steps": world.step_count + (steps - done)}
+        save_checkpoint(Path(args.checkpoint), world, meta)
+    if not args.quiet:
+        print(format_table(summary))
+        if frames is not None:
+            print(f"\n{len(frames.paths)} frames in {frames.directory}" + (f", {video}" if video else ""))
+    if interrupted:
+        raise KeyboardInterrupt
+    return 0
