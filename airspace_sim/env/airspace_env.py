@@ -128,7 +128,8 @@ class AirspaceParallelEnv(ParallelEnv):
     discrete_actions : Discrete(5) actions instead of a continuous turn rate.
     reward : dict of reward term weights (see :mod:`airspace_sim.env.rewards`).
     agents : which aircraft are agents (see :func:`select_agents`).
-    capture_radius : metres within which a route waypoint counts as reached.
+    capture_radius : metres within which a route waypoint counts as reached (at least one
+        step's travel; a waypoint passed abeam counts as reached too, as in the world).
     render_size : (width, height) of rendered frames in pixels.
     """
 
@@ -354,15 +355,26 @@ class AirspaceParallelEnv(ParallelEnv):
         return cross, math.atan2(d[1], d[0]), dist, True
 
     def _advance_route(self, a) -> bool:
-        """Move to the next waypoint when within the capture radius; True on arrival at the last."""
+        """Move on to the next waypoint once reached; True on reaching the last one.
+
+        As the world's route autopilot: a waypoint is reached within
+        max(capture_radius, one step's travel) of it, or once passed abeam (beyond the
+        line through it perpendicular to the leg).
+        """
         wps = self._routes_wp[a]
         if not wps or self._wp_index[a] >= len(wps):
             return False
-        p = np.asarray(self.world.positions, dtype=float)[self._index[a]]
+        i = self._index[a]
+        p = np.asarray(self.world.positions, dtype=float)[i]
+        reach = max(self.capture_radius, float(np.asarray(self.world.speeds)[i]) * float(self.world.dt))
         arrived = False
         while self._wp_index[a] < len(wps):
-            wp = np.asarray(wps[self._wp_index[a]])
-            if np.hypot(*(wp - p)) > self.capture_radius:
+            k = self._wp_index[a]
+            wp = np.asarray(wps[k])
+            prev = np.asarray(self._leg_start[a]) if k == 0 else np.asarray(wps[k - 1])
+            to_wp = wp - p
+            passed = float(np.dot(to_wp, wp - prev)) < 0.0
+            if np.hypot(*to_wp) > reach and not passed:
                 break
             self._wp_index[a] += 1
             self._prev_dist[a] = None
