@@ -90,9 +90,14 @@ def load_plugins() -> list[str]:
     """Import entry-point plugins and plugin-folder files; return what was loaded."""
     loaded = []
     for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
-        obj = ep.load()
-        if callable(obj):
-            obj()
+        try:
+            obj = ep.load()
+            if callable(obj):
+                obj()
+        except Exception as exc:
+            dist = getattr(getattr(ep, "dist", None), "name", None)
+            where = f"entry point {ep.name} = {ep.value}" + (f" (distribution {dist})" if dist else "")
+            raise UserError(f"plugin {where}: failed to load: {_one_line(exc)}") from exc
         loaded.append(f"entry point {ep.name}")
     seen = set()
     for folder in plugin_folders():
@@ -113,6 +118,12 @@ def load_plugins() -> list[str]:
                 spec.loader.exec_module(module)
             except Exception as exc:
                 del sys.modules[mod_name]
-                raise UserError(f"plugin {path}: failed to load: {exc}") from exc
+                raise UserError(f"plugin {path}: failed to load: {_one_line(exc)}") from exc
             loaded.append(str(path))
     return loaded
+
+
+def _one_line(exc: BaseException) -> str:
+    """``"ErrorType: message"`` on one line."""
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
