@@ -1,0 +1,201 @@
+"""Built-in autopilots: what each aircraft flies when nobody (resolver, agent) overrides it.
+
+An autopilot drives a *group* of aircraft at once (all aircraft with the same autopilot
+name), with arrays, never one Python object per aircraft in the step loop. Registered with
+:func:`airspace_sim.registry.register` as ``"straight"``, ``"route"`` and ``"markov"``.
+
+Interface (a plugin autopilot implements the same)::
+
+    factory(members (n,) int, specs list[AircraftSpec] (n,), context AutopilotContext) -> obj
+    obj.turn_rate(state) -> (n,) commanded turn rate, rad/s CCW+ (the world clips it to the
+        aircraft's limit)
+    obj.desired_heading(state) -> (n,) heading it wants to settle on (rad), NaN for none;
+        the world only resumes toward it when the turn is clear of conflicts
+    obj.after_step(state) -> (n,) bool: finished (the aircraft leaves the world)
+    obj.progress(state) -> (n,) planned distance covered so far, m (NaN: no plan)
+    obj.modes -> (n,) int true Markov mode in effect over the last step, or None
+
+``state`` is a :class:`FlightState` of the *whole* world; use ``members`` to index it.
+All angles radians CCW from east, distances metres, times seconds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from airspace_sim.dynamics.presets import Preset
+from airspace_sim.registry import register
+from airspace_sim.world import streams
+
+
+def wrap(a):
+    """Angle(s) wrapped to [−π, π)."""
+    return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi
+
+
+@dataclass
+class FlightState:
+    """The world's true kinematic state, read-only for autopilots (N aircraft)."""
+
+    positions: np.ndarray  #: (N, 2) m
+    headings: np.ndarray  #: (N,) rad
+    speeds: np.ndarray  #: (N,) m/s
+    max_turn_rate: np.ndarray  #: (N,) rad/s
+    dt: float  #: s
+    step: int  #: index of the step about to be flown (turn_rate) or just flown (after_step)
+
+
+@dataclass
+class AutopilotContext:
+    """What an autopilot may need besides its aircraft."""
+
+    dt: float  #: world step, s
+    preset: Preset  #: dynamics preset at the world's dt (Markov chain, turn rates)
+    keys: np.ndarray  #: (N,) uint64 per-aircraft random keys (see :mod:`.streams`)
+    start_positions: np.ndarray  #: (N, 2) m
+
+
+def _toward(target_heading, state, members):
+    h = state.headings[members]
+    lim = state.max_turn_rate[members]
+    return np.clip(wrap(target_heading - h) / state.dt, -lim, lim)
+
+
+class StraightAutopilot:
+    """Holds the initial heading (and turns back to it after an avoidance manoeuvre)."""
+
+    def __init__(self, members, specs, context: AutopilotContext):
+        self.members = np.asarray(members, dtype=np.int64)
+        self.heading = np.radians([s.heading_deg for s in specs]).astype(float)
+        self.start = context.start_positions[self.members].copy()
+        self.modes = None
+
+    def desired_heading(self, state):
+        return self.heading
+
+    def turn_rate(self, state):
+        return _toward(self.heading, state, self.members)
+
+    def after_step(self, state):
+        return np.zeros(self.members.size, dtype=bool)
+
+    def progress(self, state):
+        d = state.positions[self.members] - self.start
+        return d[:, 0] * np.cos(self.heading) + d[:, 1] * np.sin(self.heading)
+
+
+class RouteAutopilot:
+    """Flies direct to each waypoint in turn, within the turn-rate limit.
+
+    A waypoint is reached when the aircraft is within one step's travel of it or has passed
+    abeam of it (on the far side of the line through it perpendicular to the leg). After the
+    last waypoint the aircraft has *finished* and leaves the world. With no waypoints it
+    behaves like ``"straight"``.
+    """
+
+    def __init__(self, members, specs, context: AutopilotContext):
+        self.members = m = np.asarray(members, dtype=np.int64)
+        n = m.size
+        self.count = np.array([len(s.waypoints) for s in specs], dtype=np.int64)
+        W = max(int(self.count.max(initial=0)), 1)
+        self.wp = np.zeros((n, W, 2))
+        for a, s in enumerate(specs):
+            if s.waypoints:
+                self.wp[a, : len(s.waypoints)] = np.asarray(s.waypoints, dtype=float)
+        self.start = context.start_positions[m].copy()
+        self.heading0 = np.radians([s.heading_deg for s in specs]).astype(float)
+        self.index = np.zeros(n, dtype=np.int64)
+        # prev[a, w]: where leg w starts (the start position for the first leg)
+        self.prev = np.concatenate([self.start[:, None, :], self.wp[:, :-1]], axis=1)
+        leg = np.linalg.norm(self.wp - self.prev, axis=-1)  # (n, W)
+        leg[np.arange(W)[None, :] >= self.count[:, None]] = 0.0
+        # tail[a, w]: route length from waypoint w to the last one
+        after = np.concatenate([leg[:, 1:], np.zeros((n, 1))], axis=1)
+        self.tail = np.cumsum(after[:, ::-1], axis=1)[:, ::-1]
+        self.planned = leg.sum(axis=1)
+        self.done = np.zeros(n, dtype=bool)
+        self.modes = None
+
+    def _target(self):
+        rows = np.arange(self.members.size)
+        w = np.minimum(self.index, self.wp.shape[1] - 1)
+        return self.wp[rows, w], self.prev[rows, w]
+
+    def desired_heading(self, state):
+        tgt, _ = self._target()
+        d = tgt - state.positions[self.members]
+        h = np.arctan2(d[:, 1], d[:, 0])
+        return np.where((self.count == 0) | self.done, self.heading0, h)
+
+    def turn_rate(self, state):
+        return _toward(self.desired_heading(state), state, self.members)
+
+    def after_step(self, state):
+        pos = state.positions[self.members]
+        step_len = state.speeds[self.members] * state.dt
+        for _ in range(2):  # a step can at most reach one waypoint; twice for safety
+            tgt, prev = self._target()
+            to_wp = tgt - pos
+            near = np.hypot(to_wp[:, 0], to_wp[:, 1]) <= step_len
+            passed = np.einsum("ij,ij->i", to_wp, tgt - prev) < 0.0
+            hit = (near | passed) & ~self.done & (self.count > 0)
+            self.index = self.index + hit
+            self.done |= hit & (self.index >= self.count)
+        return self.done.copy()
+
+    def progress(self, state):
+        tgt, _ = self._target()
+        rows = np.arange(self.members.size)
+        w = np.minimum(self.index, self.wp.shape[1] - 1)
+        remaining = np.linalg.norm(tgt - state.positions[self.members], axis=1) + self.tail[rows, w]
+        out = np.where(self.done, self.planned, self.planned - remaining)
+        # no waypoints: progress along the initial heading, like "straight"
+        d = state.positions[self.members] - self.start
+        along = d[:, 0] * np.cos(self.heading0) + d[:, 1] * np.sin(self.heading0)
+        return np.where(self.count == 0, along, out)
+
+
+class MarkovAutopilot:
+    """The paper's jump-Markov pilot (§II): modes straight / left / right at the preset's turn
+    rates, the mode chain Π of the preset at the world's dt, drawn per aircraft from its own
+    counter-based stream (:mod:`.streams`). Turn rates are clipped to the aircraft's limit.
+
+    ``modes[a]`` is the mode in effect over the last step (truth convention of
+    :mod:`airspace_sim.dynamics.truth`).
+    """
+
+    def __init__(self, members, specs, context: AutopilotContext):
+        self.members = np.asarray(members, dtype=np.int64)
+        self.keys = context.keys[self.members]
+        self.rates = np.asarray(context.preset.turn_rates, dtype=float)
+        Pi = np.asarray(context.preset.transition_matrix, dtype=float)
+        self.cdf = np.cumsum(Pi, axis=1)
+        mu0 = np.cumsum(context.preset.mu0())
+        u = streams.uniform(self.keys, streams.INITIAL_MODE, 0)
+        self.modes = np.minimum((u[:, None] >= mu0[None, :]).sum(axis=1), len(self.rates) - 1)
+        self._last_step = -1
+
+    def desired_heading(self, state):
+        return np.full(self.members.size, np.nan)
+
+    def turn_rate(self, state):
+        if state.step != self._last_step:  # draw the mode of the coming step once
+            self._last_step = state.step
+            u = streams.uniform(self.keys, streams.MODE, state.step)
+            cdf = self.cdf[self.modes]
+            self.modes = np.minimum((u[:, None] >= cdf).sum(axis=1), len(self.rates) - 1)
+        lim = state.max_turn_rate[self.members]
+        return np.clip(self.rates[self.modes], -lim, lim)
+
+    def after_step(self, state):
+        return np.zeros(self.members.size, dtype=bool)
+
+    def progress(self, state):
+        return np.full(self.members.size, np.nan)
+
+
+register("autopilot", "straight")(StraightAutopilot)
+register("autopilot", "route")(RouteAutopilot)
+register("autopilot", "markov")(MarkovAutopilot)

@@ -1,0 +1,110 @@
+"""Safety, efficiency and estimation metrics of one world run, accumulated step by step.
+
+Definitions (units SI; ``d`` a true centre distance between two aircraft):
+
+- loss of separation (LoS): a pair with ``d < r_safe``. ``los_events``: LoS episodes
+  (a pair entering LoS; a pair leaving and re-entering counts twice); ``los_pairs``:
+  distinct pairs that ever lost separation; ``los_duration_s``: Σ over steps of the number
+  of pairs in LoS × dt (pair-seconds); ``worst_intrusion``: max of ``1 − d/r_safe`` over
+  pairs in LoS (0 if none).
+- NMAC: ``d < nmac``; ``nmac_events``, ``nmac_pairs`` as above.
+- ``min_separation_m``: smallest ``d`` seen between any two aircraft within sensor range
+  of each other, over all steps (``inf`` if no pair was ever within range).
+- ``alerts``: conflict alerts, i.e. times an ownship's resolver flag went from clear to
+  conflict; ``conflict_s``: Σ over ownships of the time flagged in conflict.
+- extra path: for aircraft with a plan (``route`` or ``straight`` autopilot),
+  ``flown − planned distance covered`` (route: plan length minus distance still to go along
+  the route; straight: progress along the initial heading). ``extra_path_m`` (sum),
+  ``extra_path_pct`` (100·Σ extra / Σ planned covered).
+- ``avoidance_turn_deg``: mean over aircraft of the total |heading change| flown while
+  following resolver advice, degrees.
+- tracking: ``track_rmse_m``: RMS of the position error of every track at every step;
+  ``mode_accuracy``: fraction of (track, step) samples of Markov intruders whose most
+  probable IMM mode equals the intruder's true mode (NaN if there were none);
+  ``track_steps``: number of (track, step) samples.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+class Metrics:
+    def __init__(self, n: int, r_safe: float, nmac: float, dt: float):
+        self.n, self.r_safe, self.nmac, self.dt = n, float(r_safe), float(nmac), float(dt)
+        self.los_events = 0
+        self.nmac_events = 0
+        self.los_keys: set[int] = set()
+        self.nmac_keys: set[int] = set()
+        self.los_pair_steps = 0
+        self.worst_intrusion = 0.0
+        self.min_sep = math.inf
+        self.alerts = 0
+        self.conflict_steps = 0
+        self.avoid_turn = np.zeros(n)
+        self.sq_err = 0.0
+        self.track_samples = 0
+        self.mode_hits = 0
+        self.mode_samples = 0
+        self._prev_conflict = np.zeros(n, dtype=bool)
+
+    def contacts(self, positions, los_keys, los_began, nmac_keys, nmac_began, range_keys):
+        """Record this step's pair sets (sorted keys ``i·N + j``) and new episodes."""
+        n = max(self.n, 1)
+        self.los_events += int(len(los_began))
+        self.nmac_events += int(len(nmac_began))
+        self.los_keys.update(int(k) for k in los_keys)
+        self.nmac_keys.update(int(k) for k in nmac_keys)
+        self.los_pair_steps += int(los_keys.size)
+        if range_keys.size:
+            i, j = range_keys // n, range_keys % n
+            d = np.hypot(*(positions[i] - positions[j]).T)
+            self.min_sep = min(self.min_sep, float(d.min()))
+        if los_keys.size:
+            i, j = los_keys // n, los_keys % n
+            d = np.hypot(*(positions[i] - positions[j]).T)
+            self.worst_intrusion = max(self.worst_intrusion, float(1.0 - d.min() / self.r_safe))
+
+    def conflicts(self, conflict):
+        self.alerts += int(np.count_nonzero(conflict & ~self._prev_conflict))
+        self.conflict_steps += int(np.count_nonzero(conflict))
+        self._prev_conflict = conflict.copy()
+
+    def avoidance_turn(self, turned: np.ndarray, following_advice: np.ndarray):
+        self.avoid_turn += np.where(following_advice, np.abs(turned), 0.0)
+
+    def tracking(self, track_pos, true_pos, mode_est=None, mode_true=None):
+        """Add (P, 2) estimated vs true positions; optional (Q,) modes to compare."""
+        if len(track_pos):
+            e = np.asarray(track_pos) - np.asarray(true_pos)
+            self.sq_err += float(np.einsum("ij,ij->", e, e))
+            self.track_samples += len(track_pos)
+        if mode_est is not None and len(mode_est):
+            self.mode_hits += int(np.count_nonzero(mode_est == mode_true))
+            self.mode_samples += len(mode_est)
+
+    def report(self, steps: int, time: float, flown, progress, has_plan) -> dict:
+        extra = np.where(has_plan, np.asarray(flown) - np.nan_to_num(progress), 0.0)
+        planned = float(np.sum(np.where(has_plan, np.nan_to_num(progress), 0.0)))
+        return {
+            "steps": int(steps),
+            "time_s": float(time),
+            "aircraft": int(self.n),
+            "los_events": self.los_events,
+            "los_pairs": len(self.los_keys),
+            "los_duration_s": self.los_pair_steps * self.dt,
+            "worst_intrusion": self.worst_intrusion,
+            "nmac_events": self.nmac_events,
+            "nmac_pairs": len(self.nmac_keys),
+            "min_separation_m": self.min_sep,
+            "alerts": self.alerts,
+            "conflict_s": self.conflict_steps * self.dt,
+            "extra_path_m": float(extra.sum()),
+            "extra_path_pct": 100.0 * float(extra.sum()) / planned if planned > 0 else 0.0,
+            "avoidance_turn_deg": float(np.degrees(self.avoid_turn).mean()) if self.n else 0.0,
+            "track_rmse_m": math.sqrt(self.sq_err / self.track_samples) if self.track_samples else math.nan,
+            "mode_accuracy": self.mode_hits / self.mode_samples if self.mode_samples else math.nan,
+            "track_steps": self.track_samples,
+        }

@@ -1,0 +1,68 @@
+"""Counter-based random numbers: one independent stream per aircraft (or pair), no state.
+
+Every random number in a world is a pure function of (world seed, who, what, step): the
+aircraft keys come from ``numpy.random.SeedSequence(seed).spawn``, and a draw for aircraft
+``i`` at step ``k`` is ``splitmix64`` of its key mixed with ``(stream, k)``. So results do
+not depend on the order in which aircraft or pairs are visited, nor on which other aircraft
+exist, and nothing is shared between worlds (no module-level mutable state).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_M1 = np.uint64(0xBF58476D1CE4E5B9)
+_M2 = np.uint64(0x94D049BB133111EB)
+_S30, _S27, _S31, _S11 = np.uint64(30), np.uint64(27), np.uint64(31), np.uint64(11)
+_TWO_M53 = 2.0**-53
+
+#: Stream numbers (the "what" of a draw).
+MODE, DETECT, NOISE_X, NOISE_Y, INITIAL_MODE, SPARE = range(6)
+
+
+def mix(z: np.ndarray) -> np.ndarray:
+    """splitmix64 finaliser, elementwise on uint64 arrays (wrapping arithmetic)."""
+    z = np.asarray(z, dtype=np.uint64)
+    with np.errstate(over="ignore"):
+        z = (z ^ (z >> _S30)) * _M1
+        z = (z ^ (z >> _S27)) * _M2
+    return z ^ (z >> _S31)
+
+
+def aircraft_keys(seed: int, n: int, stream: int = 0) -> np.ndarray:
+    """(n,) uint64 keys, one per aircraft, from ``SeedSequence(seed)`` children.
+
+    ``stream`` selects an independent family of keys (child ``stream`` of the root, whose
+    ``n`` children give the keys).
+    """
+    root = np.random.SeedSequence(int(seed))
+    family = root.spawn(stream + 1)[stream]
+    if n == 0:
+        return np.zeros(0, dtype=np.uint64)
+    return np.array([c.generate_state(1, np.uint64)[0] for c in family.spawn(n)], dtype=np.uint64)
+
+
+def pair_keys(keys: np.ndarray, owner: np.ndarray, intruder: np.ndarray) -> np.ndarray:
+    """Keys of ordered pairs (owner, intruder) from per-aircraft keys, (P,) uint64."""
+    with np.errstate(over="ignore"):
+        return mix(keys[owner] ^ mix(keys[intruder] + _GOLDEN))
+
+
+def _counter_word(stream: int, step: int) -> np.uint64:
+    word = (int(stream) * 0x100000001B3 + int(step) * 0x2545F4914F6CDD1D + 1) % (1 << 64)
+    return mix(np.array([word], dtype=np.uint64))[0]
+
+
+def uniform(keys: np.ndarray, stream: int, step: int) -> np.ndarray:
+    """Uniform numbers in [0, 1), one per key, for this (stream, step), shape of ``keys``."""
+    with np.errstate(over="ignore"):
+        z = mix(mix(np.asarray(keys, dtype=np.uint64) ^ _counter_word(stream, step)) + _GOLDEN)
+    return (z >> _S11).astype(np.float64) * _TWO_M53
+
+
+def normal(keys: np.ndarray, stream: int, step: int) -> np.ndarray:
+    """Standard normal numbers, one per key (Box–Muller on two counter-based uniforms)."""
+    u1 = 1.0 - uniform(keys, 2 * stream + 1000, step)  # (0, 1]
+    u2 = uniform(keys, 2 * stream + 1001, step)
+    return np.sqrt(-2.0 * np.log(u1)) * np.cos(2.0 * np.pi * u2)
