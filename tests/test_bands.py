@@ -1,0 +1,246 @@
+"""Multi-intruder band search: exact boundaries, brute-force oracle, symmetry, limits."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from airspace_sim.avoidance import band_search, resume_heading_change, tangent_heading_change
+from airspace_sim.avoidance.bands import CLEAR_TOLERANCE, cpa_min_ratio
+from airspace_sim.avoidance.heading import rotate
+
+R = 3000.0
+RES = np.radians(1.0)
+
+
+def random_scene(rng, n, k, spread=30000.0):
+    vo = rotate(np.array([250.0, 0.0]), rng.uniform(-np.pi, np.pi, n))
+    pos = rng.uniform(-spread, spread, (n, k, 2))
+    # intruders mostly heading roughly toward the ownship, so conflicts are common
+    aim = np.arctan2(-pos[..., 1], -pos[..., 0]) + rng.normal(0.0, 0.3, (n, k))
+    vi = rotate(np.stack([rng.uniform(150, 500, (n, k)), np.zeros((n, k))], -1), aim)
+    valid = rng.random((n, k)) < 0.8
+    return vo, pos, vi - vo[:, None, :], valid
+
+
+def slow_choice(vo, r, v, valid, cands, radius, T):
+    """Pure-Python oracle: CPA per candidate per intruder, then the documented choice rule."""
+    vi = v + vo
+    best = None
+    scored = []
+    for psi in cands:
+        c, s = np.cos(psi), np.sin(psi)
+        ro = np.array([c * vo[0] - s * vo[1], s * vo[0] + c * vo[1]])
+        worst = np.inf
+        for j in range(len(r)):
+            if not valid[j]:
+                continue
+            w = vi[j] - ro
+            t = 0.0 if w @ w == 0 else min(max(-(r[j] @ w) / (w @ w), 0.0), T)
+            worst = min(worst, np.linalg.norm(r[j] + t * w) / radius)
+        scored.append((psi, worst))
+    clear = [(psi, w) for psi, w in scored if w >= 1 - CLEAR_TOLERANCE]
+    key = lambda pw: (abs(pw[0]), pw[0] > 0)  # noqa: E731
+    if clear:
+        best = min(clear, key=key)[0]
+    else:
+        top = max(w for _, w in scored)
+        best = min([pw for pw in scored if pw[1] == top], key=key)[0]
+    zero = [w for psi, w in scored if psi == 0.0]
+    return best, not (zero[0] >= 1 - CLEAR_TOLERANCE), {p for p, w in clear}
+
+
+def grid_candidates(mx):
+    m = int(np.floor(mx / RES + 1e-9))
+    return [k * RES for k in range(-m, m + 1)] + [-mx, mx]
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_vectorised_equals_brute_force_grid(seed):
+    rng = np.random.default_rng(seed)
+    n, k = 12, 4
+    vo, r, v, valid = random_scene(rng, n, k)
+    mx = rng.uniform(0.0, np.pi / 3, n)
+    mx[0] = 0.0
+    res = band_search(vo, r, v, valid, mx, R, 120.0, 0.1, RES, exact_candidates=False)
+    for i in range(n):
+        psi, conflict, clear = slow_choice(vo[i], r[i], v[i], valid[i], grid_candidates(mx[i]),
+                                           R * 1.1, 120.0)
+        assert res.heading_change[i] == psi
+        assert res.conflict[i] == conflict
+        got = set(res.candidates[i][res.band[i]].tolist())
+        assert got == clear
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_vectorised_equals_brute_force_with_exact_candidates(seed):
+    rng = np.random.default_rng(100 + seed)
+    n, k = 10, 3
+    vo, r, v, valid = random_scene(rng, n, k)
+    mx = np.full(n, np.pi / 4)
+    res = band_search(vo, r, v, valid, mx, R, 90.0, 0.2, RES)
+    for i in range(n):
+        cands = res.candidates[i][~np.isnan(res.candidates[i])]
+        # the candidate set holds the grid and the limits
+        assert set(grid_candidates(mx[i])) <= set(cands.tolist())
+        psi, conflict, clear = slow_choice(vo[i], r[i], v[i], valid[i], cands, R * 1.2, 90.0)
+        assert res.heading_change[i] == psi
+        assert res.conflict[i] == conflict
+
+
+def single_intruder_scene(rng):
+    vo = rotate(np.array([250.0, 0.0]), rng.uniform(-np.pi, np.pi))
+    d = rng.uniform(8000, 40000)
+    bearing = rng.uniform(-np.pi, np.pi)
+    b = d * np.array([np.cos(bearing), np.sin(bearing)])
+    # intruder velocity such that the relative velocity points inside the collision cone
+    beta = np.arcsin(R * 1.1 / d)
+    v_rel = rng.uniform(200, 700) * rotate(-b / d, rng.uniform(-0.9, 0.9) * beta)
+    return vo, b, v_rel
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_single_intruder_reaches_exact_boundary(seed):
+    rng = np.random.default_rng(seed)
+    vo, b, v_rel = single_intruder_scene(rng)
+    T, margin = 2000.0, 0.1  # long look-ahead: the boundary is a tangent of the cone
+    mx = np.pi / 2
+    res = band_search(vo[None], b[None, None], v_rel[None, None], np.ones((1, 1), bool),
+                      np.array([mx]), R, T, margin)
+    psi = res.heading_change[0]
+    assert res.conflict[0]
+    # the choice is one of heading.py's exact tangents with radius R·(1+margin) ...
+    tangents = [tangent_heading_change(vo, v_rel + vo, b, R * (1 + margin), side)[0]
+                for side in (-1.0, 1.0)]
+    ratio = cpa_min_ratio(vo[None], b[None, None], v_rel[None, None], np.ones((1, 1), bool),
+                          np.array([[psi]]), R * (1 + margin), T)[0, 0]
+    if ratio >= 1 - CLEAR_TOLERANCE and abs(psi) < mx:
+        assert min(abs(psi - t) for t in tangents if np.isfinite(t)) < 1e-12
+        # ... and nothing closer to the current heading is clear (fine scan)
+        scan = np.linspace(-abs(psi), abs(psi), 4001)[1:-1]
+        ratios = cpa_min_ratio(vo[None], b[None, None], v_rel[None, None],
+                               np.ones((1, 1), bool), scan[None], R * (1 + margin), T)[0]
+        assert np.all(ratios < 1 - CLEAR_TOLERANCE)
+    # the grid-only search lands within one grid step outside of the exact boundary
+    grid = band_search(vo[None], b[None, None], v_rel[None, None], np.ones((1, 1), bool),
+                       np.array([mx]), R, T, margin, exact_candidates=False)
+    if grid.band[0].any() and abs(psi) < mx - RES:
+        assert 0 <= abs(grid.heading_change[0]) - abs(psi) <= RES + 1e-12
+
+
+def test_all_clear_no_turn():
+    vo = np.array([[250.0, 0.0], [0.0, 200.0]])
+    r = np.array([[[50000.0, 50000.0]], [[-20000.0, 0.0]]])
+    v = np.array([[[0.0, 300.0]], [[-300.0, -200.0]]])  # both moving away
+    res = band_search(vo, r, v, np.ones((2, 1), bool), np.full(2, np.pi / 4))
+    assert np.array_equal(res.heading_change, [0.0, 0.0])
+    assert not res.conflict.any()
+    # no valid intruder at all, or no slot at all
+    res = band_search(vo, r, v, np.zeros((2, 1), bool), np.full(2, np.pi / 4))
+    assert np.array_equal(res.heading_change, [0.0, 0.0]) and not res.conflict.any()
+    res = band_search(vo, np.zeros((2, 0, 2)), np.zeros((2, 0, 2)), np.zeros((2, 0), bool),
+                      np.full(2, np.pi / 4))
+    assert np.array_equal(res.heading_change, [0.0, 0.0]) and not res.conflict.any()
+    assert res.band[~np.isnan(res.candidates)].all()
+
+
+def test_head_on_prefers_right_turn_exactly_on_tangent():
+    vo = np.array([0.0, 250.0])
+    vi = np.array([0.0, -250.0])
+    b = np.array([0.0, 30000.0])
+    res = band_search(vo[None], b[None, None], (vi - vo)[None, None], np.ones((1, 1), bool),
+                      np.array([np.pi / 2]), R, 1000.0, 0.1)
+    psi = res.heading_change[0]
+    assert psi < 0 and res.conflict[0]
+    exact, ok = tangent_heading_change(vo, vi, b, R * 1.1, -1.0)
+    assert ok and psi == pytest.approx(exact, abs=1e-12)
+
+
+def test_two_symmetric_intruders_deterministic_right_turn():
+    vo = np.array([[0.0, 250.0]])
+    r = np.array([[[-4000.0, 15000.0], [4000.0, 15000.0]]])
+    vi = np.array([[[60.0, -250.0], [-60.0, -250.0]]])
+    v = vi - vo[:, None, :]
+    valid = np.ones((1, 2), bool)
+    out = [band_search(vo, r, v, valid, np.array([np.pi / 3]), R, 120.0, 0.1) for _ in range(2)]
+    assert out[0].conflict[0]
+    assert out[0].heading_change[0] < 0
+    assert out[0].heading_change[0] == out[1].heading_change[0]
+    # the mirror choice is clear too: the band is symmetric
+    mirror = band_search(vo, r * [-1, 1], v * [-1, 1], valid, np.array([np.pi / 3]), R)
+    assert mirror.heading_change[0] == out[0].heading_change[0]
+    # nothing clear within a tight limit: any turn brings one of the two closer, so the
+    # maximin choice is to hold the heading
+    tight = band_search(vo, r, v, valid, np.array([np.radians(2.0)]), R, 120.0, 0.1)
+    assert not tight.band.any()
+    assert tight.heading_change[0] == 0.0
+    # one intruder dead ahead: both limits are equally good, the right one is taken
+    head_on = band_search(vo, np.array([[[0.0, 15000.0]]]), np.array([[[0.0, -500.0]]]),
+                          np.ones((1, 1), bool), np.array([np.radians(2.0)]), R, 120.0, 0.1)
+    assert not head_on.band.any()
+    assert head_on.heading_change[0] == -np.radians(2.0)
+
+
+def test_rotation_of_whole_scene_is_invariant():
+    rng = np.random.default_rng(7)
+    n, k = 40, 3
+    vo, r, v, valid = random_scene(rng, n, k)
+    mx = np.full(n, np.pi / 4)
+    base = band_search(vo, r, v, valid, mx, R, 120.0, 0.1)
+    for alpha in (0.3, -2.0, np.pi / 2):
+        rot = band_search(rotate(vo, alpha), rotate(r, alpha), rotate(v, alpha), valid, mx,
+                          R, 120.0, 0.1)
+        assert np.array_equal(rot.conflict, base.conflict)
+        assert np.allclose(rot.heading_change, base.heading_change, atol=1e-9)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 6), st.integers(0, 5),
+       st.floats(0.0, np.pi), st.floats(10.0, 300.0))
+def test_never_exceeds_max_heading_change(seed, n, k, top, T):
+    rng = np.random.default_rng(seed)
+    vo, r, v, valid = random_scene(rng, n, k)
+    mx = rng.uniform(0.0, top, n)
+    res = band_search(vo, r, v, valid, mx, R, T, 0.1)
+    assert res.heading_change.shape == res.conflict.shape == (n,)
+    assert np.all(np.abs(res.heading_change) <= mx + 1e-15)
+    assert np.all(np.isfinite(res.heading_change))
+    used = ~np.isnan(res.candidates)
+    assert np.all(np.abs(res.candidates[used]) <= mx.repeat(used.shape[1]).reshape(used.shape)[used]
+                  * (1 + 1e-12) + 1e-15)
+    assert not (res.band & ~used).any()
+
+
+def test_invalid_slots_are_ignored_even_with_garbage():
+    rng = np.random.default_rng(3)
+    vo, r, v, valid = random_scene(rng, 8, 4)
+    base = band_search(vo, r, v, valid, np.full(8, 0.7))
+    r2, v2 = r.copy(), v.copy()
+    r2[~valid] = np.nan
+    v2[~valid] = 1e9
+    other = band_search(vo, r2, v2, valid, np.full(8, 0.7))
+    assert np.array_equal(base.heading_change, other.heading_change)
+    assert np.array_equal(base.conflict, other.conflict)
+
+
+def test_per_pair_radius():
+    # a bigger radius for one pair only changes the result like a bigger common radius
+    rng = np.random.default_rng(5)
+    vo, r, v, _ = random_scene(rng, 6, 1)
+    valid = np.ones((6, 1), bool)
+    a = band_search(vo, r, v, valid, np.full(6, 0.8), np.full((6, 1), 5000.0))
+    b = band_search(vo, r, v, valid, np.full(6, 0.8), 5000.0)
+    assert np.array_equal(a.heading_change, b.heading_change)
+
+
+def test_resume():
+    vo = np.array([[250.0, 0.0], [250.0, 0.0], [250.0, 0.0]])
+    desired = np.array([0.5, 0.5, -2.0])
+    r = np.array([[[0.0, 90000.0]], [[30000.0, 30000.0 * np.tan(0.5)]], [[0.0, 90000.0]]])
+    v = np.array([[[0.0, 0.0]], [[-250.0 * np.cos(0.5), -250.0 * np.sin(0.5)]], [[0.0, 0.0]]])
+    v = v - vo[:, None, :]
+    psi, clear = resume_heading_change(vo, desired, r, v, np.ones((3, 1), bool),
+                                       np.array([1.0, 1.0, 0.2]))
+    assert clear[0] and psi[0] == pytest.approx(0.5)
+    assert not clear[1] and psi[1] == 0.0  # the desired heading points at a head-on intruder
+    assert clear[2] and psi[2] == pytest.approx(-0.2)  # limited
