@@ -104,8 +104,8 @@ def test_nan_rows_predict_only_and_all_nan():
     np.testing.assert_allclose(kf.x, x0 @ F.T)
     np.testing.assert_allclose(kf.P, np.broadcast_to(F @ (np.eye(5) * 100) @ F.T + Q, (3, 5, 5)))
     assert np.all(np.isnan(kf.nis))
-    kf.step(np.array([[100.0, 0.0], [np.nan, 0.0], [200.0, 0.0]]))
-    assert np.isnan(kf.nis[1]) and np.all(np.isfinite(kf.nis[[0, 2]]))
+    kf.step(np.array([[100.0, 0.0], [np.nan, 0.0], [200.0, np.inf]]))
+    assert np.isnan(kf.nis[1]) and np.isnan(kf.nis[2]) and np.isfinite(kf.nis[0])
     assert kf.P[1, 0, 0] > kf.P[0, 0, 0]
 
 
@@ -157,3 +157,7 @@ def test_shape_errors():
         KalmanFilter(F, np.eye(5), np.ones((2, 4)), np.eye(2), np.zeros((1, 4)), np.eye(4))
     with pytest.raises(UserError, match="x0"):
         KalmanFilter(F, np.eye(4), np.ones((2, 4)), np.eye(2), np.zeros((1, 5)), np.eye(4))
+    with pytest.raises(UserError, match="P0"):
+        KalmanFilter(F, np.eye(4), np.ones((2, 4)), np.eye(2), np.zeros((1, 4)), np.eye(3))
+    with pytest.raises(UserError, match="finite"):
+        KalmanFilter(F, np.eye(4), np.ones((2, 4)), np.eye(2), np.full((1, 4), np.nan), np.eye(4))

@@ -238,8 +238,8 @@ def realistic(dt: float = 1.0) -> Preset:
     its 99% band; with σ_a = 1.0 it peaks at 3.8–4.5 over ten seeds (average ≈ 3.2, i.e.
     slightly conservative) and the average NIS stays inside its 95% band
     (``tests/test_consistency.py``, ``python -m airspace_sim.tracking.consistency``). The
-    accuracy cost is ~3% of position RMSE (34.2 m against 33.1 m matched; the best-tuned CV
-    filter gets 48.8 m).
+    accuracy cost is under 3% of position RMSE (33.9 m against 33.1 m matched, same seed;
+    the best-tuned CV filter gets 48.2 m).
 
     Mode chain and Q are given in continuous time, so ``with_(dt=...)`` (or
     ``get("realistic", dt=...)``) keeps the behaviour in seconds.

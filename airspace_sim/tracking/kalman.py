@@ -84,7 +84,12 @@ class KalmanFilter:
         P0 = np.asarray(P0, dtype=float)
         if x0.ndim != 2 or x0.shape[1] != self.n:
             raise UserError(f"KalmanFilter: x0 must be (B, {self.n}), got {x0.shape}")
-        P0 = np.broadcast_to(P0, (x0.shape[0], self.n, self.n))
+        try:
+            P0 = np.broadcast_to(P0, (x0.shape[0], self.n, self.n))
+        except ValueError:
+            raise UserError(f"KalmanFilter: P0 must be ({self.n}, {self.n}) or (B, {self.n}, {self.n}), got {P0.shape}") from None
+        if not (np.all(np.isfinite(x0)) and np.all(np.isfinite(P0))):
+            raise UserError("KalmanFilter: x0 and P0 must be finite")
         start = self.B
         self.x = np.concatenate([self.x, x0])
         self.P = np.concatenate([self.P, P0])
@@ -106,7 +111,7 @@ class KalmanFilter:
     def update(self, z) -> None:
         """Measurement update for rows of ``z`` (B, m) that are not NaN."""
         z = np.asarray(z, dtype=float).reshape(self.B, self.m)
-        has = ~np.any(np.isnan(z), axis=1)
+        has = np.all(np.isfinite(z), axis=1)  # NaN (or inf) row: no measurement
         self.nis = np.full(self.B, np.nan)
         if not has.any():
             return
@@ -124,7 +129,7 @@ class KalmanFilter:
         self.x[idx], self.P[idx] = x, _sym(P)
 
     def step(self, z) -> None:
-        """One cycle: predict, then update with ``z`` (B, m); a NaN row predicts only."""
+        """One cycle: predict, then update with ``z`` (B, m); a NaN (or inf) row predicts only."""
         self.predict()
         self.update(z)
 
