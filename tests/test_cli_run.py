@@ -26,6 +26,21 @@ def cli(*args, cwd=None, env=None, timeout=120):
     )
 
 
+class Result:
+    def __init__(self, returncode, stdout, stderr):
+        self.returncode, self.stdout, self.stderr = returncode, stdout, stderr
+
+
+def main_in_process(capsys, *args):
+    """The same entry point in this process (faster: imports and JIT once per session)."""
+    from airspace_sim.cli import main
+
+    capsys.readouterr()
+    rc = main(list(args))
+    out, err = capsys.readouterr()
+    return Result(rc, out, err)
+
+
 def assert_one_line_error(proc, *needles):
     assert proc.returncode == 2, (proc.returncode, proc.stderr)
     err = proc.stderr.strip()
@@ -44,18 +59,25 @@ def test_unknown_scenario(tmp_path):
     assert_one_line_error(cli("run", "nope", cwd=tmp_path), "unknown scenario 'nope'", "head_on")
 
 
+def test_bad_set_subprocess(tmp_path):
+    assert_one_line_error(cli("run", "head_on", "--set", "traffic.count=abc", cwd=tmp_path),
+                          "--set traffic.count:", "non-negative integer", "'abc'")
+
+
 @pytest.mark.parametrize(
     "override, needles",
     [
-        ("traffic.count=abc", ["--set traffic.count:", "non-negative integer", "'abc'"]),
         ("traffic.count=-3", ["--set traffic.count:", "-3"]),
         ("trafic.count=3", ["--set trafic:", "unknown key", "did you mean 'traffic'"]),
         ("traffic.count", ["--set traffic.count:", "key=value"]),
         ("resolver.kind=nope", ["--set resolver.kind:", "resolver", "'nope'"]),
+        ("tracker.kind=nope", ["--set tracker.kind:", "tracker", "'nope'"]),
+        ("sensor.kind=nope", ["'nope'"]),
     ],
 )
-def test_bad_set(tmp_path, override, needles):
-    assert_one_line_error(cli("run", "head_on", "--set", override, cwd=tmp_path), *needles)
+def test_bad_set(tmp_path, monkeypatch, capsys, override, needles):
+    monkeypatch.chdir(tmp_path)
+    assert_one_line_error(main_in_process(capsys, "run", "head_on", "--steps", "1", "--set", override), *needles)
 
 
 BAD_FILES = {
@@ -67,11 +89,19 @@ BAD_FILES = {
 }
 
 
+def test_bad_scenario_file_subprocess(tmp_path):
+    text, needles = BAD_FILES["malformed.toml"]
+    (tmp_path / "malformed.toml").write_text(text)
+    err = assert_one_line_error(cli("run", "malformed.toml", cwd=tmp_path), *needles)
+    assert "error: malformed.toml: " in err
+
+
 @pytest.mark.parametrize("filename", sorted(BAD_FILES))
-def test_bad_scenario_file(tmp_path, filename):
+def test_bad_scenario_file(tmp_path, monkeypatch, capsys, filename):
+    monkeypatch.chdir(tmp_path)
     text, needles = BAD_FILES[filename]
     (tmp_path / filename).write_text(text)
-    err = assert_one_line_error(cli("run", filename, cwd=tmp_path), *needles)
+    err = assert_one_line_error(main_in_process(capsys, "run", filename), *needles)
     assert f"error: {filename}: " in err  # the file is named (relative to the working folder)
 
 
@@ -108,7 +138,12 @@ def test_jsonable_and_table():
 
 # --------------------------------------------------------------------------- real runs
 
-world_ready = importlib.util.find_spec("airspace_sim.world.world") is not None
+try:
+    from airspace_sim.world import World  # noqa: F401
+
+    world_ready = True
+except ImportError:
+    world_ready = False
 renderer_ready = importlib.util.find_spec("airspace_sim.rendering.renderer") is not None
 needs_world = pytest.mark.skipif(not world_ready, reason="airspace_sim.world.World not written yet")
 
@@ -122,10 +157,11 @@ def _summary_without_timing(path):
 
 @needs_world
 @pytest.mark.skipif(not renderer_ready, reason="airspace_sim.rendering not written yet")
-def test_run_renders_frames_gif_and_summary(tmp_path):
+def test_run_renders_frames_gif_and_summary(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
     out = tmp_path / "frames"
-    proc = cli("run", "demo", "--steps", "6", "--every", "2", "--render", str(out), "--gif",
-               "--size", "200x160", "--json", str(tmp_path / "s.json"), cwd=tmp_path)
+    proc = main_in_process(capsys, "run", "demo", "--steps", "6", "--every", "2", "--render", str(out),
+                           "--gif", "--size", "200x160", "--json", str(tmp_path / "s.json"))
     assert proc.returncode == 0, proc.stderr
     import imageio.v3 as iio
 
@@ -135,53 +171,63 @@ def test_run_renders_frames_gif_and_summary(tmp_path):
         img = iio.imread(p)
         assert img.shape == (160, 200, 3) and img.dtype == np.uint8
         assert img.reshape(-1, 3).std(axis=0).max() > 5.0, f"{p.name} is blank"
+    assert not np.array_equal(iio.imread(pngs[0]), iio.imread(pngs[-1])), "frames do not change"
     gif = iio.imread(out / "run.gif", index=None)
     assert gif.shape[0] == 4
     summary = json.loads((out / "summary.json").read_text())
     assert summary["scenario"] == "demo" and summary["seed"] == 7 and summary["steps"] == 6
-    assert summary["frames"] == 4
+    assert summary["frames"] == 4 and summary["simulated_time"] == pytest.approx(6.0)
     assert isinstance(summary["metrics"], dict) and summary["metrics"]
     assert json.loads((tmp_path / "s.json").read_text()) == summary
     assert "metric" in proc.stdout and "demo" in proc.stdout
 
 
+def _run_json(capsys, path, *args):
+    proc = main_in_process(capsys, "run", *args, "--json", str(path), "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    return _summary_without_timing(path)
+
+
 @needs_world
-def test_run_is_reproducible_and_seed_matters(tmp_path):
-    a, b, c = (tmp_path / f"{k}.json" for k in "abc")
-    for path, seed in ((a, "5"), (b, "5"), (c, "6")):
-        proc = cli("run", "dense_random", "--steps", "5", "--seed", seed, "--set", "traffic.count=12",
-                   "--json", str(path), "--quiet", cwd=tmp_path)
-        assert proc.returncode == 0, proc.stderr
-    sa, sb, sc = map(_summary_without_timing, (a, b, c))
+def test_run_is_reproducible_and_seed_matters(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    args = ["dense_random", "--steps", "5", "--set", "traffic.count=12"]
+    sa = _run_json(capsys, tmp_path / "a.json", *args, "--seed", "5")
+    sb = _run_json(capsys, tmp_path / "b.json", *args, "--seed", "5")
+    sc = _run_json(capsys, tmp_path / "c.json", *args, "--seed", "6")
     assert sa == sb
     assert sa["seed"] == 5 and sa["overrides"] == ["traffic.count=12"] and sa["steps"] == 5
     assert sa["simulated_time"] == pytest.approx(5.0)
+    assert sa["metrics"]["aircraft"] == 12
     assert sa != sc
 
 
 @needs_world
-def test_unknown_tracker_plugin_is_one_line(tmp_path):
-    err = assert_one_line_error(
-        cli("run", "head_on", "--steps", "1", "--set", "tracker.kind=nope", cwd=tmp_path), "nope"
-    )
-    assert "tracker" in err
+def test_run_stops_when_everybody_left(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    # the head-on pair reaches its last waypoints (60 km away at 230 m/s) after ~261 s
+    s = _run_json(capsys, tmp_path / "s.json", "head_on", "--steps", "1000", "--set", "resolver.kind=none")
+    assert s["all_left"] and s["steps"] < 1000
 
 
 @needs_world
-def test_checkpoint_resume_matches_uninterrupted_run(tmp_path):
-    whole, first, second = tmp_path / "whole.json", tmp_path / "first.json", tmp_path / "second.json"
+def test_checkpoint_resume_matches_uninterrupted_run(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
     ckpt = tmp_path / "run.pkl"
-    common = ["--quiet", "--set", "traffic.count=8"]
-    proc = cli("run", "dense_random", "--steps", "8", "--json", str(whole), *common, cwd=tmp_path)
-    assert proc.returncode == 0, proc.stderr
-    proc = cli("run", "dense_random", "--steps", "4", "--checkpoint", str(ckpt), "--json", str(first),
-               *common, cwd=tmp_path)
-    if proc.returncode == 2 and "cannot be saved" in proc.stderr:
-        pytest.skip("this World is not picklable: " + proc.stderr.strip())
-    assert proc.returncode == 0, proc.stderr
-    proc = cli("run", "--resume", str(ckpt), "--steps", "4", "--json", str(second), "--quiet", cwd=tmp_path)
-    assert proc.returncode == 0, proc.stderr
-    w, s = _summary_without_timing(whole), _summary_without_timing(second)
-    assert s["total_steps"] == 8 and s["steps"] == 4
-    assert s["metrics"] == w["metrics"]
-    assert s["simulated_time"] == pytest.approx(w["simulated_time"])
+    common = ["--set", "traffic.count=8"]
+    whole = _run_json(capsys, tmp_path / "whole.json", "dense_random", "--steps", "8", *common)
+    first = _run_json(capsys, tmp_path / "first.json", "dense_random", "--steps", "3", *common,
+                      "--checkpoint", str(ckpt))
+    assert first["steps"] == 3 and ckpt.is_file()
+    second = _run_json(capsys, tmp_path / "second.json", "--resume", str(ckpt), "--steps", "5")
+    assert second["total_steps"] == 8 and second["steps"] == 5
+    assert second["metrics"] == whole["metrics"]
+    assert second["simulated_time"] == pytest.approx(whole["simulated_time"])
+    assert second["overrides"] == ["traffic.count=8"]
+
+
+def test_resume_errors(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert_one_line_error(main_in_process(capsys, "run", "--resume", "nope.pkl"), "nope.pkl", "no such file")
+    (tmp_path / "junk.pkl").write_bytes(b"not a pickle")
+    assert_one_line_error(main_in_process(capsys, "run", "--resume", "junk.pkl"), "junk.pkl", "not a readable checkpoint")

@@ -122,8 +122,10 @@ def _fmt(v) -> str:
     if isinstance(v, bool) or v is None:
         return str(v).lower() if isinstance(v, bool) else "-"
     if isinstance(v, float):
-        if v == int(v) and abs(v) < 1e15:
-            return f"{int(v)}" if abs(v) >= 1e4 else f"{v:g}"
+        if not math.isfinite(v):
+            return str(v)
+        if abs(v) >= 1e4:
+            return f"{v:.0f}"
         return f"{v:.4g}"
     if isinstance(v, list):
         text = ", ".join(_fmt(x) for x in v[:8]) + (", ..." if len(v) > 8 else "")
@@ -214,36 +216,70 @@ class _Frames:
 
 
 # --------------------------------------------------------------------------- checkpoints
+#
+# A checkpoint holds the validated Scenario, the seed and the number of steps taken, plus
+# the pickled World when the World can be pickled. When it cannot (pymunk's cffi handles),
+# --resume rebuilds World(scenario, seed) and replays the steps: the world is deterministic
+# (every random number is a function of seed, aircraft and step), so the resumed state is
+# the same, at the cost of re-simulating.
+
+CHECKPOINT_FORMAT = 1
 
 
-def save_checkpoint(path: Path, world, meta: dict) -> None:
-    """Pickle the world (and how it was made) to ``path`` atomically."""
+def save_checkpoint(path: Path, world, scenario, meta: dict) -> str:
+    """Write a checkpoint to ``path`` atomically; returns ``"pickle"`` or ``"replay"``."""
     import pickle
 
-    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UserError(f"--checkpoint {path}: cannot create folder: {exc}") from None
     tmp = path.with_name(path.name + ".tmp")
+    record = {"format": CHECKPOINT_FORMAT, "meta": meta, "scenario": scenario,
+              "steps_taken": int(world.step_count)}
+    try:
+        blob = pickle.dumps(world, protocol=pickle.HIGHEST_PROTOCOL)
+        record["world"], how = blob, "pickle"
+    except Exception:  # noqa: BLE001 - any unpicklable member: fall back to replay
+        record["world"], how = None, "replay"
     try:
         with open(tmp, "wb") as f:
-            pickle.dump({"format": 1, "meta": meta, "world": world}, f, protocol=pickle.HIGHEST_PROTOCOL)
-    except (TypeError, AttributeError, pickle.PicklingError) as exc:
+            pickle.dump(record, f, protocol=pickle.HIGHEST_PROTOCOL)
+        tmp.replace(path)
+    except OSError as exc:
         tmp.unlink(missing_ok=True)
-        raise UserError(f"--checkpoint: this world cannot be saved ({exc})") from None
-    tmp.replace(path)
+        raise UserError(f"--checkpoint {path}: cannot write: {exc}") from None
+    return how
 
 
-def load_checkpoint(path: Path) -> tuple[object, dict]:
+def load_checkpoint(path: Path, quiet: bool = True):
+    """The world saved in ``path`` (unpickled or replayed) and its metadata."""
     import pickle
 
+    from airspace_sim import registry
+
+    registry.names("tracker")  # plugins first: a pickled world may refer to plugin classes
     try:
         with open(path, "rb") as f:
-            data = pickle.load(f)
+            record = pickle.load(f)
     except FileNotFoundError:
         raise UserError(f"--resume {path}: no such file") from None
-    except (OSError, pickle.UnpicklingError, EOFError, AttributeError, ImportError) as exc:
-        raise UserError(f"--resume {path}: not a readable checkpoint ({exc})") from None
-    if not isinstance(data, dict) or data.get("format") != 1:
+    except Exception as exc:  # noqa: BLE001 - corrupt or foreign file
+        raise UserError(f"--resume {path}: not a readable checkpoint ({type(exc).__name__}: {exc})") from None
+    if not isinstance(record, dict) or record.get("format") != CHECKPOINT_FORMAT:
         raise UserError(f"--resume {path}: not an airspace-sim checkpoint")
-    return data["world"], data["meta"]
+    meta = record["meta"]
+    if record.get("world") is not None:
+        return pickle.loads(record["world"]), meta
+    from tqdm import tqdm
+
+    from airspace_sim.world import World
+
+    world = World(record["scenario"], seed=meta["seed"])
+    for _ in tqdm(range(record["steps_taken"]), desc="replaying", unit="step", leave=False,
+                  disable=quiet or not sys.stderr.isatty(), file=sys.stderr):
+        world.step()
+    return world, meta
 
 
 # --------------------------------------------------------------------------- command
@@ -265,10 +301,11 @@ def run(args) -> int:
     if args.resume:
         if args.overrides or args.seed is not None:
             raise UserError("--resume continues a saved run: --set and --seed cannot change it")
-        world, meta = load_checkpoint(Path(args.resume))
+        world, meta = load_checkpoint(Path(args.resume), quiet=args.quiet)
         if args.scenario and args.scenario not in (meta["scenario"], meta.get("source")):
             raise UserError(f"--resume {args.resume}: it holds scenario {meta['scenario']!r}, not {args.scenario!r}")
         name, source, seed, overrides = meta["scenario"], meta["source"], meta["seed"], meta["overrides"]
+        sc = world.scenario
         remaining = max(0, meta["total_steps"] - world.step_count)
         if not args.steps and not remaining:
             raise UserError(f"--resume {args.resume}: that run is complete; give --steps N to run further")
@@ -299,9 +336,12 @@ def run(args) -> int:
     try:
         for k in range(steps):
             world.step()
-            if frames is not None and ((k + 1) % args.every == 0 or k + 1 == steps):
+            everybody_left = not world.active.any()  # nothing more to see: stop early
+            if frames is not None and ((k + 1) % args.every == 0 or k + 1 == steps or everybody_left):
                 frames.add(world.snapshot())
             bar.update(1)
+            if everybody_left:
+                break
     except KeyboardInterrupt:
         interrupted = True
     finally:
@@ -322,6 +362,7 @@ def run(args) -> int:
         "wall_time": round(wall, 3),
         "steps_per_second": round(done / wall, 1) if wall > 0 else None,
         "interrupted": interrupted,
+        "all_left": not bool(world.active.any()),
         "metrics": jsonable(world.metrics()),
     }
     if frames is not None:
@@ -333,12 +374,14 @@ def run(args) -> int:
         _write_json(Path(args.json), summary)
     if args.checkpoint:
         meta = {"scenario": name, "source": source, "seed": seed, "overrides": overrides,
-                "total_steps": world.step_count + (steps - done)}
-        save_checkpoint(Path(args.checkpoint), world, meta)
+                "total_steps": world.step_count + (steps - done if interrupted else 0)}
+        summary["checkpoint"] = save_checkpoint(Path(args.checkpoint), world, sc, meta)
     if not args.quiet:
         print(format_table(summary))
         if frames is not None:
             print(f"\n{len(frames.paths)} frames in {frames.directory}" + (f", {video}" if video else ""))
+        if args.checkpoint:
+            print(f"checkpoint ({summary['checkpoint']}) in {args.checkpoint}")
     if interrupted:
         raise KeyboardInterrupt
     return 0

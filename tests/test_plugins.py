@@ -1,0 +1,249 @@
+"""Plugins: found by name via a plugins folder and via an entry point; clear errors otherwise.
+
+The ``kalman`` tracker in ``plugins/kalman_tracker.py`` is the plugin under test; each test
+starts from a registry without it and restores the registry afterwards.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from airspace_sim import registry
+from airspace_sim.dynamics import presets
+from airspace_sim.errors import UserError
+
+REPO = Path(__file__).resolve().parent.parent
+PLUGIN = REPO / "plugins" / "kalman_tracker.py"
+PREFIX = "airspace_sim_plugin_"
+
+
+@pytest.fixture
+def clean_registry(monkeypatch, tmp_path):
+    """Built-ins registered, no plugins loaded, cwd an empty folder; restored afterwards."""
+    registry._import_builtins()
+    saved = {kind: dict(parts) for kind, parts in registry._REGISTRY.items()}
+    saved_loaded = registry._loaded_plugins
+    saved_modules = {k: v for k, v in sys.modules.items() if k.startswith(PREFIX)}
+    for k in saved_modules:
+        del sys.modules[k]
+    registry._REGISTRY["tracker"].pop("kalman", None)
+    registry._loaded_plugins = False
+    work = tmp_path / "work"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    monkeypatch.delenv("AIRSPACE_SIM_PLUGINS", raising=False)
+    yield work
+    for k in [k for k in sys.modules if k.startswith(PREFIX) or k == "airspace_sim_kalman_ep"]:
+        del sys.modules[k]
+    sys.modules.update(saved_modules)
+    for kind, parts in saved.items():
+        registry._REGISTRY[kind].clear()
+        registry._REGISTRY[kind].update(parts)
+    registry._loaded_plugins = saved_loaded
+
+
+def _check_kalman_factory():
+    factory = registry.get("tracker", "kalman")
+    f = factory(presets.get("realistic"), 50.0)
+    assert f.B == 0
+    rows = f.append(np.zeros((2, 5)), np.eye(5) * 100.0, None)
+    assert list(rows) == [0, 1]
+    return f
+
+
+def test_unknown_plugin_name_is_one_line(clean_registry):
+    with pytest.raises(UserError) as info:
+        registry.get("tracker", "kalman")
+    msg = str(info.value)
+    assert msg.startswith("unknown tracker 'kalman' (known: ") and "imm" in msg and "\n" not in msg
+
+
+def test_found_in_working_folder_plugins(clean_registry):
+    (clean_registry / "plugins").mkdir()
+    shutil.copy(PLUGIN, clean_registry / "plugins")
+    _check_kalman_factory()
+    assert "kalman" in registry.names("tracker")
+
+
+def test_found_via_environment_folder(clean_registry, tmp_path, monkeypatch):
+    folder = tmp_path / "mine"
+    folder.mkdir()
+    shutil.copy(PLUGIN, folder)
+    monkeypatch.setenv("AIRSPACE_SIM_PLUGINS", os.pathsep.join([str(tmp_path / "absent"), str(folder)]))
+    _check_kalman_factory()
+
+
+def _install_distribution(site: Path, module_name: str, source: str, entry: str | None = None):
+    """A minimal installed distribution (dist-info with an entry point) in ``site``."""
+    site.mkdir(parents=True, exist_ok=True)
+    (site / f"{module_name}.py").write_text(source)
+    info = site / "airspace_sim_test_plugin-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: airspace-sim-test-plugin\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text(f"[airspace_sim.plugins]\nkalman = {entry or module_name}\n")
+
+
+def test_found_via_entry_point(clean_registry, tmp_path, monkeypatch):
+    site = tmp_path / "site"
+    _install_distribution(site, "airspace_sim_kalman_ep", PLUGIN.read_text())
+    monkeypatch.syspath_prepend(str(site))
+    loaded = registry.load_plugins()
+    assert "entry point kalman" in loaded
+    _check_kalman_factory()
+    assert registry.get("tracker", "kalman").__module__ == "airspace_sim_kalman_ep"
+
+
+def test_plugin_file_that_raises_names_the_file(clean_registry):
+    (clean_registry / "plugins").mkdir()
+    bad = clean_registry / "plugins" / "broken.py"
+    bad.write_text("x = 1\nraise RuntimeError('boom\\nsecond line')\n")
+    with pytest.raises(UserError) as info:
+        registry.get("tracker", "imm")
+    msg = str(info.value)
+    assert "\n" not in msg
+    assert str(bad) in msg and "RuntimeError: boom second line" in msg
+    assert "broken" not in {k[len(PREFIX):] for k in sys.modules if k.startswith(PREFIX)}
+
+
+def test_plugin_file_with_syntax_error(clean_registry):
+    (clean_registry / "plugins").mkdir()
+    (clean_registry / "plugins" / "typo.py").write_text("def f(:\n    pass\n")
+    with pytest.raises(UserError, match=r"typo\.py: failed to load: SyntaxError"):
+        registry.names("tracker")
+
+
+def test_entry_point_that_raises_is_a_user_error(clean_registry, tmp_path, monkeypatch):
+    site = tmp_path / "site"
+    _install_distribution(site, "airspace_sim_kalman_ep", "raise ImportError('missing dep')\n")
+    monkeypatch.syspath_prepend(str(site))
+    with pytest.raises(UserError) as info:
+        registry.load_plugins()
+    msg = str(info.value)
+    assert "entry point kalman = airspace_sim_kalman_ep" in msg and "ImportError: missing dep" in msg
+
+
+def test_cli_reports_broken_plugin_in_one_line(tmp_path):
+    (tmp_path / "plugins").mkdir()
+    (tmp_path / "plugins" / "broken.py").write_text("1 / 0\n")
+    env = {**os.environ, "AIRSPACE_SIM_PLUGINS": ""}
+    proc = subprocess.run([sys.executable, "-m", "airspace_sim", "run", "head_on", "--steps", "1"],
+                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert "Traceback" not in proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "broken.py" in lines[0] and "ZeroDivisionError" in lines[0], proc.stderr
+
+
+# --------------------------------------------------------------------------- the Kalman tracker
+
+
+def _load_plugin_module():
+    spec = importlib.util.spec_from_file_location("kalman_tracker_under_test", PLUGIN)
+    module = importlib.util.module_from_spec(spec)
+    saved = {kind: dict(parts) for kind, parts in registry._REGISTRY.items()}
+    try:
+        spec.loader.exec_module(module)
+    finally:  # do not leave this copy registered
+        for kind, parts in saved.items():
+            registry._REGISTRY[kind].clear()
+            registry._REGISTRY[kind].update(parts)
+    return module
+
+
+def test_kalman_tracker_follows_a_straight_target():
+    mod = _load_plugin_module()
+    rng = np.random.default_rng(0)
+    sigma, dt, n_targets = 50.0, 1.0, 64
+    f = mod.kalman_tracker(presets.get("realistic"), sigma)
+    v = rng.uniform(-250, 250, size=(n_targets, 2))
+    p0 = rng.uniform(-2e4, 2e4, size=(n_targets, 2))
+    x0 = np.zeros((n_targets, 5))
+    x0[:, [0, 2]] = p0 + rng.normal(0, sigma, (n_targets, 2))
+    x0[:, [1, 3]] = v + rng.normal(0, 20, (n_targets, 2))
+    x0[:, 4] = 0.3  # ignored: the CV model has no turn
+    P0 = np.diag([sigma**2, 30.0**2, sigma**2, 30.0**2, 1e-4])
+    f.append(x0, P0, None)
+    assert np.all(f.x[:, 4] == 0)
+    errs = []
+    for k in range(1, 61):
+        truth = p0 + v * dt * k
+        z = truth + rng.normal(0, sigma, truth.shape)
+        if k % 10 == 0:
+            z[::2] = np.nan  # missed scans: predict only
+        f.step(z)
+        errs.append(np.hypot(*(f.x[:, [0, 2]] - truth).T))
+    errs = np.array(errs)
+    # After convergence the filter beats a single measurement (σ√2 ≈ 71 m RMS radial).
+    assert np.sqrt(np.mean(errs[-20:] ** 2)) < sigma
+    vel_rms = np.sqrt(np.mean((f.x[:, [1, 3]] - v) ** 2))
+    assert vel_rms < 10.0  # m/s, from an initial 20 m/s error per axis
+    # the filter's covariance is honest: mean NEES of the position near 2 (chi-square, 2 dof)
+    e = f.x[:, [0, 2]] - truth
+    Pp = f.P[:, [0, 2]][:, :, [0, 2]]
+    nees = np.einsum("bi,bi->b", e, np.linalg.solve(Pp, e[..., None])[..., 0])
+    assert 0.5 < nees.mean() < 4.0
+    assert np.all(f.x[:, 4] == 0)
+    assert np.all(np.linalg.eigvalsh(f.P) > 0)
+    assert f.mu.shape == (n_targets, 1)
+
+
+def test_kalman_tracker_remove_by_mask_and_indices():
+    mod = _load_plugin_module()
+    f = mod.kalman_tracker(presets.get("seed"), 50.0)
+    x0 = np.zeros((5, 5))
+    x0[:, 0] = np.arange(5)
+    f.append(x0, np.eye(5), None)
+    f.remove(np.array([True, False, True, False, False]))
+    assert list(f.x[:, 0]) == [1, 3, 4]
+    f.remove([0])
+    assert list(f.x[:, 0]) == [3, 4]
+    f.remove(np.zeros(2, dtype=bool))
+    assert f.B == 2
+    with pytest.raises(ValueError):
+        f.remove(np.zeros(3, dtype=bool))
+
+
+def test_kalman_noise_follows_the_preset():
+    mod = _load_plugin_module()
+    real, seed = presets.get("realistic"), presets.get("seed")
+    assert mod.manoeuvre_sigma(real) == pytest.approx(0.5 * np.radians(3.0) * np.mean(real.speed_range))
+    f1 = mod.kalman_tracker(real, 50.0)
+    f2 = mod.kalman_tracker(real, 50.0, sigma_accel=0.0)
+    assert f1.Q[1, 1] > f2.Q[1, 1] > 0
+    assert mod.kalman_tracker(seed, 50.0).F[0, 1] == pytest.approx(0.1)
+    np.testing.assert_allclose(f1.R, 2500.0 * np.eye(2))
+
+
+try:
+    from airspace_sim.world import World  # noqa: F401
+
+    world_ready = True
+except ImportError:
+    world_ready = False
+
+
+@pytest.mark.skipif(not world_ready, reason="airspace_sim.world.World not written yet")
+def test_kalman_tracker_in_a_world(clean_registry):
+    (clean_registry / "plugins").mkdir()
+    shutil.copy(PLUGIN, clean_registry / "plugins")
+    from airspace_sim.scenarios import load
+    from airspace_sim.world import World
+
+    sc = load("head_on", ["tracker.kind=kalman"])
+    world = World(sc, seed=0)
+    for _ in range(10):
+        world.step()
+    tracks = world.tracks
+    assert len(tracks.owner) == 2  # each aircraft tracks the other
+    assert np.all(np.isfinite(tracks.x))
+    # the track is near the truth (within a few σ)
+    err = tracks.x[:, [0, 2]] - world.positions[tracks.intruder]
+    assert np.all(np.hypot(*err.T) < 300.0)
