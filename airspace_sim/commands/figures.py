@@ -1,0 +1,28 @@
+"""``airspace-sim figures``: PNG counterparts of the paper's figures 4–7 and world-frame figures."""
+
+from __future__ import annotations
+
+HELP = "Write the paper's figures 4-7 and world-frame/false-detection figures as PNGs"
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--out", default="out/figures", help="output folder (default out/figures)")
+    parser.add_argument("--seed", type=int, default=0, help="campaign seed of the encounters shown (default 0)")
+
+
+def run(args) -> int:
+    from pathlib import Path
+
+    from airspace_sim.encounters.figures import make_all
+    from airspace_sim.errors import UserError
+
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise UserError(f"--out: {out} exists and is not a folder")
+    try:
+        paths = make_all(out, seed=args.seed)
+    except PermissionError as exc:
+        raise UserError(f"--out: cannot write into {out}: {exc.strerror}") from None
+    for p in paths:
+        print(p)
+    return 0
