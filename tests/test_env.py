@@ -38,7 +38,7 @@ def aec(**kw):
 
 
 def test_parallel_api_test():
-    parallel_api_test(par(), num_cycles=60)
+    parallel_api_test(par(), num_cycles=40)
 
 
 def test_api_test_on_aec_form():
@@ -100,17 +100,16 @@ def same(a, b):
 def test_same_seed_same_everything_for_100_steps():
     kw = dict(scenario="demo", agents=3, max_cycles=100)
     t1 = rollout(par(**kw), seed=5)
-    t2 = rollout(par(**kw), seed=5)
+    # a used env, reset with the same seed, replays a fresh env exactly
+    env = par(**kw)
+    rollout(env, seed=9, steps=3)
+    t2 = rollout(env, seed=5)
     assert len(t1) == len(t2) > 50
     for k, (s1, s2) in enumerate(zip(t1, t2)):
         assert same(s1, s2), f"step {k} differs"
     # a different seed changes the observations (sensor noise, traffic): the check can fail
-    t3 = rollout(par(**kw), seed=6)
+    t3 = rollout(par(**kw), seed=6, steps=10)
     assert not all(same(s1[0], s3[0]) for s1, s3 in zip(t1[1:], t3[1:]))
-    # reset(seed) on a used env reproduces a fresh env
-    env = par(**kw)
-    rollout(env, seed=9, steps=10)
-    assert same(rollout(env, seed=5), t1)
 
 
 # ---------------------------------------------------------------------- spaces, obs

@@ -232,7 +232,7 @@ class AirspaceParallelEnv(ParallelEnv):
 
     def _routes(self):
         """Per agent: list of waypoints (m) and the start of the first leg."""
-        specs = getattr(self.world, "aircraft", None)
+        specs = getattr(self.world, "specs", None)
         if specs is None:
             from airspace_sim.scenarios import build_aircraft
 
@@ -294,7 +294,11 @@ class AirspaceParallelEnv(ParallelEnv):
         w.step(rates)
         self.num_cycles += 1
         heading = np.asarray(w.headings, dtype=float)
-        self._turn_rate = _wrap(heading - self._prev_heading) / float(w.dt)
+        flown = getattr(w, "turn_rates", None)
+        if flown is not None:
+            self._turn_rate = np.asarray(flown, dtype=float).copy()
+        else:
+            self._turn_rate = _wrap(heading - self._prev_heading) / float(w.dt)
         self._prev_heading = heading.copy()
 
         acting = list(self.agents)

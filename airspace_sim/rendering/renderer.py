@@ -15,6 +15,7 @@ What a frame shows (north up, equal scale on both axes):
   yellow): each intruder track's estimated position (yellow cross), its 2-σ position
   ellipse (true scale), predicted positions (dots, every ``prediction_horizon / 6`` s),
   and the track's mode probabilities as three small bars (straight, left, right);
+- a red line joining the two aircraft of each pair in loss of separation;
 - a pink line for the resolver's advised heading on aircraft in conflict;
 - a time label, a scale bar in m / km and a legend.
 """
@@ -149,6 +150,7 @@ class Renderer:
         self._draw_grid(s)
         self._draw_trails(s, f)
         self._draw_protected(s, f)
+        self._draw_pairs(s, f)
         self._draw_tracks(s, f)
         self._draw_aircraft(s, f)
         self._draw_hud(s, f)
@@ -214,6 +216,16 @@ class Renderer:
                 pygame.gfxdraw.aacircle(overlay, x, y, r - 1, (*col, 255))
         s.blit(overlay, (0, 0))
 
+    def _draw_pairs(self, s, f: Frame) -> None:
+        """A red line between the two aircraft of every pair in loss of separation."""
+        if f.los_pairs is None or len(f.los_pairs) == 0:
+            return
+        pts = self._px(f.positions)
+        for i, j in f.los_pairs:
+            if 0 <= i < f.n and 0 <= j < f.n:
+                col = COLORS["nmac"] if (f.nmac[i] and f.nmac[j]) else COLORS["los"]
+                pygame.draw.line(s, col, tuple(pts[i]), tuple(pts[j]), 2)
+
     def _selected_owners(self, f: Frame) -> np.ndarray:
         if self.owners is None:
             sel = np.flatnonzero(f.controlled & f.active)
@@ -249,8 +261,13 @@ class Renderer:
             c = self._px(mean)
             if not _on_screen(c[0], c[1], 40, self.width, self.height):
                 continue
-            # predicted points
-            for q in self._px(pred[k]):
+            # predicted path: a faint line through the predicted points
+            path = self._px(pred[k])
+            path = path[np.all(np.isfinite(path), axis=1)]
+            if len(path):
+                pts = [(int(c[0]), int(c[1]))] + [tuple(map(int, q)) for q in path]
+                pygame.draw.lines(overlay, (*COLORS["prediction"], 70), False, pts, 1)
+            for q in path:
                 if np.all(np.isfinite(q)):
                     pygame.gfxdraw.filled_circle(
                         overlay, int(q[0]), int(q[1]), 2, (*COLORS["prediction"], 200)

@@ -25,6 +25,7 @@ key                shape        meaning
                                 also accepted flat as ``track_owner``, ``track_x``, ...
 ``predicted``      (P, S, 2)    predicted positions per track, m (else computed here)
 ``mode_names``     (M,) str     names of the tracker modes
+``los_pairs``      (L, 2) int   aircraft index pairs in loss of separation
 =================  ===========  ============================================================
 """
 
@@ -90,6 +91,7 @@ class Frame:
     nmac_distance: float | None
     tracks: Tracks | None
     mode_names: list
+    los_pairs: np.ndarray | None = None  #: (L, 2) int aircraft index pairs in LoS
 
     @property
     def n(self) -> int:
@@ -119,13 +121,15 @@ def _tracks(snap: dict) -> Tracks | None:
     owner = np.asarray(t["owner"], dtype=int).reshape(-1)
     n = len(owner)
     intruder = np.asarray(t.get("intruder", np.full(n, -1)), dtype=int).reshape(n)
-    x = np.asarray(t["x"], dtype=float).reshape(n, -1)
+    x = np.asarray(t["x"], dtype=float)
+    x = x.reshape(n, x.shape[-1] if x.ndim == 2 else 5)
     P = t.get("P")
     P = np.asarray(P, dtype=float).reshape(n, x.shape[1], x.shape[1]) if P is not None else None
     if P is None:
         P = np.zeros((n, x.shape[1], x.shape[1]))
     mu = t.get("mu")
-    mu = np.asarray(mu, dtype=float).reshape(n, -1) if mu is not None else np.zeros((n, 0))
+    mu = np.asarray(mu, dtype=float) if mu is not None else np.zeros((n, 0))
+    mu = mu.reshape(n, mu.shape[-1] if mu.ndim == 2 else 0)
     pred = t.get("predicted", _get(snap, "predicted"))
     if pred is not None:
         pred = np.asarray(pred, dtype=float)
@@ -176,7 +180,17 @@ def read_snapshot(snap: dict) -> Frame:
         nmac_distance=None if nmac_d is None else float(nmac_d),
         tracks=_tracks(snap),
         mode_names=[str(m) for m in modes] if modes is not None else [],
+        los_pairs=_pairs(snap.get("los_pairs")),
     )
+
+
+def _pairs(p):
+    if p is None:
+        return None
+    p = np.asarray(p)
+    if p.size == 0:
+        return np.zeros((0, 2), dtype=int)
+    return p.astype(int).reshape(-1, 2)
 
 
 def predict_positions(x: np.ndarray, horizon: float, n_points: int) -> np.ndarray:
