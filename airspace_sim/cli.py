@@ -1,6 +1,7 @@
 """The ``airspace-sim`` command line.
 
-Each subcommand is a module in :mod:`airspace_sim.commands` exposing ``HELP`` (one line),
+Each subcommand is a module in :mod:`airspace_sim.commands` (``bench_world.py`` gives
+``bench-world``) exposing ``HELP`` (one line),
 ``add_arguments(parser)`` and ``run(args) -> int``. Modules import their heavy dependencies
 inside ``run`` so that ``airspace-sim --help`` stays fast.
 
@@ -40,7 +41,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"airspace-sim {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, mod in _command_modules().items():
-        p = sub.add_parser(name, help=mod.HELP, description=mod.HELP)
+        # module bench_world.py -> subcommand "bench-world"
+        p = sub.add_parser(name.replace("_", "-"), help=mod.HELP, description=mod.HELP)
         mod.add_arguments(p)
         p.set_defaults(_run=mod.run)
     return parser
