@@ -231,3 +231,39 @@ def test_resume_errors(tmp_path, monkeypatch, capsys):
     assert_one_line_error(main_in_process(capsys, "run", "--resume", "nope.pkl"), "nope.pkl", "no such file")
     (tmp_path / "junk.pkl").write_bytes(b"not a pickle")
     assert_one_line_error(main_in_process(capsys, "run", "--resume", "junk.pkl"), "junk.pkl", "not a readable checkpoint")
+
+
+# --------------------------------------------------------------------------- bench-world
+
+
+def test_bench_world_report_with_a_fake_benchmark(monkeypatch, capsys, tmp_path):
+    import types
+
+    calls = []
+
+    def fake_bench_world(n_aircraft, steps, trackers):
+        calls.append((n_aircraft, steps, trackers))
+        # time per step ∝ N (without trackers) or N^1.5 (with)
+        cost = 1e-5 * n_aircraft * (n_aircraft ** 0.5 if trackers else 1.0)
+        return {"steps_per_second": 1.0 / cost, "setup_s": 0.1}
+
+    monkeypatch.setitem(sys.modules, "airspace_sim.world.benchmark",
+                        types.SimpleNamespace(bench_world=fake_bench_world))
+    proc = main_in_process(capsys, "bench-world", "--steps", "7", "--json", str(tmp_path / "b.json"))
+    assert proc.returncode == 0, proc.stderr
+    assert calls == [(100, 7, False), (1000, 7, False), (100, 7, True), (1000, 7, True)]
+    assert "trackers off: 100 → 1000 aircraft (×10): time per step ×10.00, growth exponent 1.00" in proc.stdout
+    assert "trackers on: 100 → 1000 aircraft (×10): time per step ×31.62, growth exponent 1.50" in proc.stdout
+    data = json.loads((tmp_path / "b.json").read_text())
+    assert [r["aircraft"] for r in data["results"]] == [100, 1000, 100, 1000]
+    assert data["growth"][0]["exponent"] == pytest.approx(1.0)
+
+
+def test_bench_world_accepts_a_number(monkeypatch, capsys):
+    import types
+
+    monkeypatch.setitem(sys.modules, "airspace_sim.world.benchmark",
+                        types.SimpleNamespace(bench_world=lambda n, steps, trackers: 5000.0 / n))
+    proc = main_in_process(capsys, "bench-world", "--sizes", "10", "20", "--trackers", "off")
+    assert proc.returncode == 0, proc.stderr
+    assert "time per step ×2.00, growth exponent 1.00" in proc.stdout
