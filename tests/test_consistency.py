@@ -19,7 +19,7 @@ from airspace_sim.tracking.consistency import (
     nis,
     two_point_initialisation,
 )
-from airspace_sim.tracking.imm import IMM
+from airspace_sim.tracking import IMM
 
 N_RUNS, N_STEPS, BURN_IN, SEED = 200, 300, 30, 2026
 
