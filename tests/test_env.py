@@ -255,7 +255,8 @@ def test_rgb_array_frames_have_content():
         assert len(np.unique(f.reshape(-1, 3), axis=0)) > 10
     assert not np.array_equal(frames[0], frames[-1])  # time label and aircraft moved
     env.close()
-    assert par().render() is None  # no render_mode: a warning, no frame
+    with pytest.warns(UserWarning, match="render_mode"):
+        assert par().render() is None  # no render_mode: a warning, no frame
 
 
 # ------------------------------------------------------------------ registry, imports

@@ -269,7 +269,7 @@ class AirspaceParallelEnv(ParallelEnv):
         self._prev_dist = {a: self._route_geometry(a)[2] for a in self.possible_agents}
         if self._renderer is not None:
             self._renderer.reset()
-        obs = {a: self._observe(a) for a in self.agents}
+        obs = self._observe_all(self.agents)
         infos = {a: self._base_info(a) for a in self.agents}
         return obs, infos
 
@@ -335,7 +335,7 @@ class AirspaceParallelEnv(ParallelEnv):
             info["arrived"] = bool(arrived)
             infos[a] = info
         self.agents = [a for a in acting if not (terms[a] or truncs[a])]
-        obs = {a: self._observe(a) for a in acting}
+        obs = self._observe_all(acting)
         if self.render_mode == "human":
             self.render()
         return obs, rewards, terms, truncs, infos
@@ -388,45 +388,64 @@ class AirspaceParallelEnv(ParallelEnv):
 
     # ----------------------------------------------------------- observation
     def _observe(self, a) -> np.ndarray:
+        return self._observe_all([a])[a]
+
+    def _observe_all(self, agents) -> dict:
+        """Observations of ``agents`` (see :mod:`.spaces` for the layout), batched."""
+        agents = list(agents)
+        if not agents:
+            return {}
         w = self.world
         lay = self.observation_layout
-        i = self._index[a]
-        pos = np.asarray(w.positions, dtype=float)[i]
-        vel = np.asarray(w.velocities, dtype=float)[i]
-        heading = float(np.asarray(w.headings, dtype=float)[i])
-        speed = float(np.asarray(w.speeds, dtype=float)[i])
-        cross, bearing, dist, has_wp = self._route_geometry(a)
-        rel_b = bearing - heading
-        max_rate = self._max_rate[a]
-        advice = float(np.asarray(w.advice, dtype=float)[i])
-        own = np.array(
+        idx = np.array([self._index[a] for a in agents], dtype=np.int64)
+        pos = np.asarray(w.positions, dtype=float)[idx]
+        vel = np.asarray(w.velocities, dtype=float)[idx]
+        heading = np.asarray(w.headings, dtype=float)[idx]
+        speed = np.asarray(w.speeds, dtype=float)[idx]
+        advice = np.asarray(w.advice, dtype=float)[idx]
+        max_rate = np.array([self._max_rate[a] for a in agents])
+        geo = [self._route_geometry(a) for a in agents]
+        cross = np.array([g[0] for g in geo])
+        rel_b = np.array([g[1] for g in geo]) - heading
+        has_wp = np.array([g[3] for g in geo], dtype=bool)
+        dist = np.array([g[2] if g[3] else 0.0 for g in geo])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            rate = np.where(max_rate > 0, self._turn_rate[idx] / max_rate, 0.0)
+        own = np.stack(
             [
                 speed / sp.V_REF,
-                math.sin(heading),
-                math.cos(heading),
-                self._turn_rate[i] / max_rate if max_rate > 0 else 0.0,
+                np.sin(heading),
+                np.cos(heading),
+                rate,
                 cross / (10 * lay.r_safe),
-                math.sin(rel_b) if has_wp else 0.0,
-                math.cos(rel_b) if has_wp else 1.0,
-                (dist / (2 * lay.sensor_range)) if has_wp else 0.0,
-                float(has_wp),
-                advice / math.pi if math.isfinite(advice) else 0.0,
-                float(np.asarray(w.conflict)[i]),
-                float(np.asarray(w.in_los)[i]),
-            ]
+                np.where(has_wp, np.sin(rel_b), 0.0),
+                np.where(has_wp, np.cos(rel_b), 1.0),
+                np.where(has_wp, dist / (2 * lay.sensor_range), 0.0),
+                has_wp.astype(float),
+                np.where(np.isfinite(advice), advice / math.pi, 0.0),
+                np.asarray(w.conflict, dtype=float)[idx],
+                np.asarray(w.in_los, dtype=float)[idx],
+            ],
+            axis=1,
         )
         tr = w.tracks
-        rows = np.flatnonzero(np.asarray(tr.owner) == i)
-        intr = sp.encode_intruders(
+        owner = np.asarray(tr.owner, dtype=np.int64)
+        slot_of = np.full(len(w.ids), -1, dtype=np.int64)
+        slot_of[idx] = np.arange(len(idx))
+        rows = np.flatnonzero(slot_of[owner] >= 0) if owner.size else owner
+        mu = np.asarray(tr.mu)
+        intr = sp.encode_intruders_batch(
             lay,
+            slot_of[owner[rows]],
             pos,
             vel,
             heading,
             np.asarray(tr.x)[rows],
             np.asarray(tr.P)[rows],
-            np.asarray(tr.mu)[rows] if np.ndim(tr.mu) == 2 else np.zeros((len(rows), 0)),
+            mu[rows] if mu.ndim == 2 else np.zeros((len(rows), 0)),
         )
-        return sp.finish(lay, own, intr)
+        obs = sp.finish(lay, own, intr)
+        return {a: obs[k] for k, a in enumerate(agents)}
 
     def _base_info(self, a) -> dict[str, Any]:
         w = self.world
@@ -467,9 +486,6 @@ class AirspaceParallelEnv(ParallelEnv):
 
     def state(self) -> np.ndarray:
         """Global state: every agent's observation, concatenated in ``possible_agents`` order."""
-        return np.concatenate(
-            [
-                self._observe(a) if a in self.agents else np.zeros(self.observation_layout.size, np.float32)
-                for a in self.possible_agents
-            ]
-        )
+        obs = self._observe_all(self.agents)
+        zero = np.zeros(self.observation_layout.size, np.float32)
+        return np.concatenate([obs.get(a, zero) for a in self.possible_agents])

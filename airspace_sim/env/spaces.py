@@ -178,12 +178,6 @@ def decode_action(agent: str, action, max_turn_rate: float, discrete: bool) -> f
     return float(np.clip(value, -max_turn_rate, max_turn_rate))
 
 
-def _rotate(v: np.ndarray, heading: float) -> np.ndarray:
-    """World-frame vectors (..., 2) -> body frame (x forward, y left) of ``heading``."""
-    c, s = math.cos(heading), math.sin(heading)
-    return np.stack([c * v[..., 0] + s * v[..., 1], -s * v[..., 0] + c * v[..., 1]], axis=-1)
-
-
 def encode_intruders(
     layout: ObservationLayout,
     own_pos: np.ndarray,
@@ -193,60 +187,108 @@ def encode_intruders(
     P: np.ndarray,
     mu: np.ndarray,
 ) -> np.ndarray:
-    """The K intruder rows (K, 11 + M) from one ownship's tracks ``x`` (T, 5), ``P``, ``mu``.
-
-    Tracks with non-finite estimates are ignored; the nearest K by estimated range are kept.
-    """
-    K, F, M = layout.n_intruders, layout.intruder_size, layout.n_modes
-    rows = np.zeros((K, F), dtype=np.float64)
+    """The K intruder rows (K, 11 + M) of one ownship from its tracks ``x`` (T, 5), ``P``
+    (T, 5, 5), ``mu`` (T, M); see :func:`encode_intruders_batch`."""
     x = np.asarray(x, dtype=np.float64).reshape(-1, 5)
-    if len(x) == 0 or K == 0:
-        return rows
+    return encode_intruders_batch(
+        layout,
+        np.zeros(len(x), dtype=np.int64),
+        np.reshape(own_pos, (1, 2)),
+        np.reshape(own_vel, (1, 2)),
+        np.reshape(heading, (1,)),
+        x,
+        P,
+        mu,
+    )[0]
+
+
+def encode_intruders_batch(
+    layout: ObservationLayout,
+    slot: np.ndarray,
+    own_pos: np.ndarray,
+    own_vel: np.ndarray,
+    heading: np.ndarray,
+    x: np.ndarray,
+    P: np.ndarray,
+    mu: np.ndarray,
+) -> np.ndarray:
+    """Intruder rows (A, K, 11 + M) of A ownships at once.
+
+    ``slot`` (T,) says which ownship (0..A-1) each track row belongs to; ``own_pos`` and
+    ``own_vel`` (A, 2), ``heading`` (A,) are the ownships' true states; ``x`` (T, 5),
+    ``P`` (T, 5, 5), ``mu`` (T, M) the tracks. Per ownship the nearest K tracks by estimated
+    range are kept, nearest first (ties by track order); tracks with non-finite estimates
+    are ignored; unused rows are zero (mask 0).
+    """
+    A = len(heading)
+    K, F, M = layout.n_intruders, layout.intruder_size, layout.n_modes
+    out = np.zeros((A, K, F), dtype=np.float64)
+    x = np.asarray(x, dtype=np.float64).reshape(-1, 5)
+    slot = np.asarray(slot, dtype=np.int64).reshape(-1)
+    if len(x) == 0 or K == 0 or A == 0:
+        return out
+    P = np.asarray(P, dtype=np.float64).reshape(len(x), 5, 5)
+    mu = np.asarray(mu, dtype=np.float64).reshape(len(x), -1)
     ok = np.all(np.isfinite(x[:, :4]), axis=1)
-    x, P, mu = x[ok], np.asarray(P)[ok], np.asarray(mu)[ok]
-    if len(x) == 0:
-        return rows
-    rel_p = np.stack([x[:, 0] - own_pos[0], x[:, 2] - own_pos[1]], axis=1)
-    rel_v = np.stack([x[:, 1] - own_vel[0], x[:, 3] - own_vel[1]], axis=1)
+    if not ok.all():
+        x, P, mu, slot = x[ok], P[ok], mu[ok], slot[ok]
+        if len(x) == 0:
+            return out
+    own_pos = np.asarray(own_pos, dtype=np.float64)
+    own_vel = np.asarray(own_vel, dtype=np.float64)
+    heading = np.asarray(heading, dtype=np.float64)
+    rel_p = x[:, [0, 2]] - own_pos[slot]
+    rel_v = x[:, [1, 3]] - own_vel[slot]
     dist = np.hypot(rel_p[:, 0], rel_p[:, 1])
-    order = np.argsort(dist, kind="stable")[:K]
-    n = len(order)
-    rp = _rotate(rel_p[order], heading)
-    rv = _rotate(rel_v[order], heading)
-    d = dist[order]
-    # position covariance in the body frame
-    cov = P[order][:, [0, 2]][:, :, [0, 2]]
-    c, s = math.cos(heading), math.sin(heading)
-    R = np.array([[c, s], [-s, c]])
-    cov_b = R @ cov @ R.T
-    sx = np.sqrt(np.clip(cov_b[:, 0, 0], 0, None))
-    sy = np.sqrt(np.clip(cov_b[:, 1, 1], 0, None))
+    order = np.lexsort((np.arange(len(x)), dist, slot))  # by ownship, then range
+    s_slot = slot[order]
+    rank = np.arange(len(order)) - np.searchsorted(s_slot, s_slot, side="left")
+    keep = rank < K
+    order, s_slot, rank = order[keep], s_slot[keep], rank[keep]
+    c = np.cos(heading[s_slot])
+    s = np.sin(heading[s_slot])
+    rp, rv = rel_p[order], rel_v[order]
+    # world frame -> body frame (x forward, y left)
+    rp = np.stack([c * rp[:, 0] + s * rp[:, 1], -s * rp[:, 0] + c * rp[:, 1]], axis=1)
+    rv = np.stack([c * rv[:, 0] + s * rv[:, 1], -s * rv[:, 0] + c * rv[:, 1]], axis=1)
+    pxx, pxy, pyy = P[order, 0, 0], P[order, 0, 2], P[order, 2, 2]
+    vx = c * c * pxx + 2 * c * s * pxy + s * s * pyy
+    vy = s * s * pxx - 2 * c * s * pxy + c * c * pyy
+    cxy = -c * s * pxx + (c * c - s * s) * pxy + c * s * pyy
+    sx = np.sqrt(np.clip(vx, 0, None))
+    sy = np.sqrt(np.clip(vy, 0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
-        rho = np.where(sx * sy > 0, cov_b[:, 0, 1] / (sx * sy), 0.0)
-    # closest point of approach on straight lines
-    vv = np.sum(rv * rv, axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
+        rho = np.where(sx * sy > 0, cxy / (sx * sy), 0.0)
+        # closest point of approach on straight lines
+        vv = np.sum(rv * rv, axis=1)
         tcpa = np.where(vv > 1e-9, -np.sum(rp * rv, axis=1) / vv, 0.0)
-    dcpa = np.hypot(*(rp + rv * np.clip(tcpa, 0, None)[:, None]).T)
+    miss = rp + rv * np.clip(tcpa, 0, None)[:, None]
+    dcpa = np.hypot(miss[:, 0], miss[:, 1])
     rng_, r_safe = layout.sensor_range, layout.r_safe
-    rows[:n, 0] = 1.0
-    rows[:n, 1:3] = rp / rng_
-    rows[:n, 3:5] = rv / (2 * V_REF)
-    rows[:n, 5] = d / rng_
-    rows[:n, 6] = sx / r_safe
-    rows[:n, 7] = sy / r_safe
-    rows[:n, 8] = rho
-    rows[:n, 9] = tcpa / layout.lookahead
-    rows[:n, 10] = dcpa / (2 * r_safe)
-    if M:
-        m = np.asarray(mu, dtype=np.float64)[order].reshape(n, -1)[:, :M]
-        rows[:n, 11 : 11 + m.shape[1]] = m
-    return rows
+    rows = np.zeros((len(order), F))
+    rows[:, 0] = 1.0
+    rows[:, 1:3] = rp / rng_
+    rows[:, 3:5] = rv / (2 * V_REF)
+    rows[:, 5] = dist[order] / rng_
+    rows[:, 6] = sx / r_safe
+    rows[:, 7] = sy / r_safe
+    rows[:, 8] = rho
+    rows[:, 9] = tcpa / layout.lookahead
+    rows[:, 10] = dcpa / (2 * r_safe)
+    if M and mu.shape[1]:
+        m = min(M, mu.shape[1])
+        rows[:, 11 : 11 + m] = mu[order, :m]
+    out[s_slot, rank] = rows
+    return out
 
 
 def finish(layout: ObservationLayout, own: np.ndarray, intruders: np.ndarray) -> np.ndarray:
-    """Concatenate, replace NaN by 0 and clip into the space's bounds (float32)."""
-    low, high = layout.bounds()
-    obs = np.concatenate([np.asarray(own, np.float64), np.asarray(intruders).reshape(-1)])
+    """Concatenate own (..., 12) and intruder (..., K, F) blocks, NaN -> 0, clip into the
+    space's bounds; float32 (..., size)."""
+    own = np.asarray(own, np.float64)
+    intruders = np.asarray(intruders, np.float64)
+    lead = own.shape[:-1]
+    obs = np.concatenate([own, intruders.reshape(lead + (-1,))], axis=-1)
     obs = np.nan_to_num(obs, nan=0.0, posinf=np.inf, neginf=-np.inf)
+    low, high = layout.bounds()
     return np.clip(obs, low, high).astype(np.float32)
