@@ -280,3 +280,17 @@ def test_env_import_does_not_import_pygame():
            "print('pygame' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+@pytest.mark.parametrize("eid", aenv.REGISTERED_IDS)
+def test_every_registered_scenario_runs(eid):
+    env = pettingzoo.make("parallel", eid, max_cycles=3)
+    obs, infos = env.reset(seed=1)
+    assert env.agents and set(obs) == set(env.agents) == set(infos)
+    while env.agents:
+        obs, rew, term, trunc, infos = env.step(
+            {a: env.action_space(a).sample() for a in env.agents}
+        )
+        for a, o in obs.items():
+            assert env.observation_space(a).contains(o)
+            assert set(infos[a]["reward_terms"]) == set(aenv.DEFAULT_WEIGHTS)

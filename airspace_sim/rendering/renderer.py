@@ -7,7 +7,8 @@ only :func:`pygame.font.init`.
 What a frame shows (north up, equal scale on both axes):
 
 - aircraft as triangles pointing along their heading; agent (controlled) aircraft blue,
-  background traffic white; a short grey trail of recent positions;
+  background traffic white; a grey trail of the positions drawn in the last
+  ``trail_seconds`` of simulated time;
 - around every aircraft a circle of radius **r_safe / 2**, so two circles touch exactly
   when the pair loses separation; coloured by the aircraft's state: green clear, amber
   conflict alert, red loss of separation, magenta NMAC;
@@ -83,7 +84,7 @@ class Renderer:
         to refit).
     owners : whose tracks to draw: None (the controlled aircraft, else aircraft 0),
         ``"all"``, or a list of aircraft ids or indices.
-    trail_length : number of past positions kept per aircraft for the trail (0 = none).
+    trail_seconds : simulated seconds of past (rendered) positions drawn as a trail (0 = none).
     prediction_horizon : seconds of track prediction drawn when the snapshot has none.
     show_ids : draw aircraft names; None = only when there are at most 24 aircraft.
     legend : draw the legend; None = only when the frame is at least 560 x 480 pixels.
@@ -95,7 +96,7 @@ class Renderer:
         height: int = 800,
         view=None,
         owners=None,
-        trail_length: int = 40,
+        trail_seconds: float = 60.0,
         prediction_horizon: float = 60.0,
         show_ids: bool | None = None,
         legend: bool | None = None,
@@ -106,7 +107,8 @@ class Renderer:
         self.height = int(height)
         self._given_view = None if view is None else tuple(float(v) for v in view)
         self.owners = owners
-        self.trail_length = int(trail_length)
+        self.trail_seconds = float(trail_seconds)
+        self._last_time = None
         self.prediction_horizon = float(prediction_horizon)
         self.show_ids = show_ids
         self.legend = legend if legend is not None else (width >= 560 and height >= 480)
@@ -128,6 +130,7 @@ class Renderer:
             else ViewTransform(self._given_view, self.width, self.height)
         )
         self._trails: dict[str, list] = {}
+        self._last_time = None
 
     @property
     def view(self):
@@ -160,16 +163,23 @@ class Renderer:
         return self.transform.to_pixels(xy)
 
     def _update_trails(self, f: Frame) -> None:
-        if self.trail_length <= 0:
+        if self.trail_seconds <= 0:
             return
+        if self._last_time is not None and f.time < self._last_time:
+            self._trails.clear()  # time went back: a new episode
+        self._last_time = f.time
+        horizon = f.time - self.trail_seconds
         for i, name in enumerate(f.ids):
             if not f.active[i]:
                 continue
             trail = self._trails.setdefault(name, [])
-            p = tuple(f.positions[i])
-            if not trail or trail[-1] != p:
+            p = (f.time, float(f.positions[i, 0]), float(f.positions[i, 1]))
+            if not trail or trail[-1][1:] != p[1:]:
                 trail.append(p)
-            del trail[: max(0, len(trail) - self.trail_length)]
+            k = 0
+            while k < len(trail) and trail[k][0] < horizon:
+                k += 1
+            del trail[:k]
 
     def _draw_grid(self, s) -> None:
         t = self.transform
@@ -187,7 +197,7 @@ class Renderer:
             trail = self._trails.get(name)
             if not f.active[i] or not trail or len(trail) < 2:
                 continue
-            pts = self._px(np.asarray(trail))
+            pts = self._px(np.asarray(trail)[:, 1:])
             pygame.draw.lines(s, COLORS["trail"], False, [tuple(p) for p in pts], 1)
 
     def _state_color(self, f: Frame, i: int):
