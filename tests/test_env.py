@@ -294,3 +294,20 @@ def test_every_registered_scenario_runs(eid):
         for a, o in obs.items():
             assert env.observation_space(a).contains(o)
             assert set(infos[a]["reward_terms"]) == set(aenv.DEFAULT_WEIGHTS)
+
+
+def test_scenario_object_overrides_and_agent_choice():
+    from airspace_sim.scenarios import load
+
+    sc = load("demo")
+    env = aenv.parallel_env(scenario=sc, overrides=["traffic.count=4"], agents=["markov2", "ring00"])
+    assert env.scenario.traffic.count == 4 and sc.traffic.count == 8  # the object is not changed
+    assert env.possible_agents == ["markov2", "ring00"]
+    _, infos = env.reset(seed=0)
+    assert infos["ring00"]["reward_terms"]["los"] == 0.0
+    # default: the scenario marks nobody, so the first aircraft is the agent
+    assert aenv.parallel_env(scenario=sc).possible_agents == ["markov1"]
+    with pytest.raises(UserError, match="ring02"):
+        aenv.parallel_env(scenario=sc, agents=["ring02"])
+    with pytest.raises(UserError, match="unknown scenario"):
+        aenv.parallel_env(scenario="no_such_scenario")

@@ -270,7 +270,12 @@ class AirspaceParallelEnv(ParallelEnv):
         if self._renderer is not None:
             self._renderer.reset()
         obs = self._observe_all(self.agents)
-        infos = {a: self._base_info(a) for a in self.agents}
+        infos = {}
+        for a in self.agents:
+            info = self._base_info(a)
+            info["reward_terms"] = rw.weighted_terms(self.reward_weights, {})
+            info["arrived"] = False
+            infos[a] = info
         return obs, infos
 
     # ------------------------------------------------------------------ step
