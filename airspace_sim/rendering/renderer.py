@@ -388,7 +388,7 @@ class Renderer:
         rows += [
             ("cross", COLORS["track"], "track estimate + 2-sigma ellipse"),
             ("dot", COLORS["prediction"], "predicted positions"),
-            ("bars", None, "modes: straight / left / right"),
+            ("bars", None, "modes: " + (" / ".join(f.mode_names[:3]) or "straight / left / right")),
             ("ring", COLORS["track"], "ownship whose tracks are shown"),
             ("line", COLORS["advice"], "resolver advice (in conflict)"),
         ]
