@@ -192,7 +192,7 @@ class _Frames:
 
         frame = self.renderer.render(snapshot)
         path = self.directory / f"frame_{len(self.paths):05d}.png"
-        iio.imwrite(path, frame)
+        iio.imwrite(path, frame, compress_level=1)  # fast: ~2x quicker than the default 6
         self.paths.append(path)
         if self._mp4 is not None:
             self._mp4.append_data(frame)
@@ -204,11 +204,17 @@ class _Frames:
         if self.video == "gif" and self.paths:
             from PIL import Image
 
+            def paletted(path):
+                # Fast octree quantisation (~5x quicker than Pillow's default median cut);
+                # frames have a few hundred colours, so 256 lose nothing visible.
+                with Image.open(path) as im:
+                    return im.convert("RGB").quantize(256, method=Image.Quantize.FASTOCTREE,
+                                                      dither=Image.Dither.NONE)
+
             out = self.directory / "run.gif"
-            first = Image.open(self.paths[0])
             # Frames are read back one at a time: memory stays at one frame, not the run.
-            first.save(
-                out, save_all=True, append_images=(Image.open(p) for p in self.paths[1:]),
+            paletted(self.paths[0]).save(
+                out, save_all=True, append_images=(paletted(p) for p in self.paths[1:]),
                 duration=int(round(1000 / self.fps)), loop=0,
             )
             return out
