@@ -37,7 +37,13 @@ def add_arguments(parser) -> None:
 def run(args) -> int:
     import time
 
-    from airspace_sim.encounters.campaign import format_summary, run_campaign, summarize
+    from airspace_sim.encounters.campaign import (
+        format_oracle_breakdown,
+        format_summary,
+        oracle_breakdown,
+        run_campaign,
+        summarize,
+    )
     from airspace_sim.encounters.relative import EncounterConfig
     from airspace_sim.errors import UserError
 
@@ -51,9 +57,16 @@ def run(args) -> int:
     wall = time.perf_counter() - t0
     rows = summarize(table)
     print(format_summary(rows))
+    breakdown = oracle_breakdown(table)
+    if breakdown:
+        print("\nLosses of separation against the oracle (perfect knowledge of the intruder's future):")
+        print(format_oracle_breakdown(breakdown))
     print(f"{table.num_rows} rows -> {args.out} ({wall:.1f} s wall)")
     if args.summary_md:
         from pathlib import Path
 
-        Path(args.summary_md).write_text(format_summary(rows, markdown=True) + "\n")
+        text = format_summary(rows, markdown=True) + "\n"
+        if breakdown:
+            text += "\n" + format_oracle_breakdown(breakdown, markdown=True) + "\n"
+        Path(args.summary_md).write_text(text)
     return 0

@@ -375,3 +375,46 @@ def format_summary(rows: list[dict], markdown: bool = False) -> str:
     widths = [max(len(h), *(len(b[i]) for b in body)) for i, h in enumerate(head)]
     fmt = "  ".join(f"{{:>{w}}}" for w in widths)
     return "\n".join([fmt.format(*head)] + [fmt.format(*b) for b in body])
+
+
+def oracle_breakdown(table) -> list[dict]:
+    """For each resolver, its losses of separation split by the oracle's verdict.
+
+    Needs ``"oracle"`` rows for the same encounters. ``unavoidable``: encounters where no
+    manoeuvre of the oracle's family within the limits clears (oracle LoS). Returns one dict
+    per resolver: ``los``, ``los_unavoidable`` (LoS the oracle could not avoid either),
+    ``los_avoidable`` (LoS the oracle avoided), ``unavoidable`` and ``runs``.
+    """
+    cols = table.to_pydict()
+    orc = {e: l for r, e, l in zip(cols["resolver"], cols["encounter"], cols["los"]) if r == ORACLE}
+    if not orc:
+        return []
+    out = []
+    for name in dict.fromkeys(cols["resolver"]):
+        if name == ORACLE:
+            continue
+        pairs = [(e, l) for r, e, l in zip(cols["resolver"], cols["encounter"], cols["los"])
+                 if r == name and e in orc]
+        los = [e for e, l in pairs if l]
+        out.append({
+            "resolver": name,
+            "runs": len(pairs),
+            "unavoidable": sum(orc[e] for e, _ in pairs),
+            "los": len(los),
+            "los_unavoidable": sum(orc[e] for e in los),
+            "los_avoidable": sum(not orc[e] for e in los),
+        })
+    return out
+
+
+def format_oracle_breakdown(rows: list[dict], markdown: bool = False) -> str:
+    head = ["resolver", "runs", "oracle: unavoidable", "LoS", "LoS also unavoidable for the oracle",
+            "LoS the oracle avoided"]
+    body = [[r["resolver"], str(r["runs"]), f"{r['unavoidable']} ({r['unavoidable'] / max(r['runs'], 1):.2%})",
+             str(r["los"]), str(r["los_unavoidable"]), str(r["los_avoidable"])] for r in rows]
+    if markdown:
+        out = ["| " + " | ".join(head) + " |", "|" + "|".join(" --- " for _ in head) + "|"]
+        return "\n".join(out + ["| " + " | ".join(b) + " |" for b in body])
+    widths = [max(len(h), *(len(b[i]) for b in body)) for i, h in enumerate(head)]
+    fmt = "  ".join(f"{{:>{w}}}" for w in widths)
+    return "\n".join([fmt.format(*head)] + [fmt.format(*b) for b in body])

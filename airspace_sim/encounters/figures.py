@@ -232,7 +232,7 @@ def world_figure(wb, b, path, cfg: EncounterConfig, resolver: str, baseline=None
     ax = fig.add_subplot(1, 2, 1)
     if baseline is not None:
         okb = baseline.trace["active"][:, b]
-        okb &= np.arange(okb.size) < ok.sum()  # same time span as the avoiding run
+        okb = okb & (np.arange(okb.size) < ok.sum())  # same time span as the avoiding run (a copy)
         ob = baseline.trace["own"][okb, b][:, [0, 2]] / 1e3
         ax.plot(ob[:, 0], ob[:, 1], color="tab:blue", lw=1.2, ls=":",
                 label=f"ownship without avoidance (same time span; min sep {baseline.metrics['min_separation_m'][b]:.0f} m)")
