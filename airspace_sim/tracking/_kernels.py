@@ -1,17 +1,22 @@
 """Numba kernels of the batched IMM (paper §IV). Internal: use :class:`airspace_sim.tracking.IMM`.
 
-One call of :func:`imm_step` runs one IMM cycle for every tracker of the batch, in a single
-loop over trackers with small fixed-size inner loops over modes and state components. All
-work arrays are allocated once per call, outside the tracker loop. There is no ``fastmath``
-and no parallel reduction, so a tracker's result depends only on its own inputs: the same
-bits whatever the batch it is in and whichever run.
+:func:`imm_step_kernel` returns the kernel for one model size (``M`` modes, ``n`` states,
+``m`` measurement components), compiled with those sizes as constants so that every small
+loop has a fixed trip count. The kernel processes the batch in chunks of ``W`` trackers:
+it gathers a chunk into structure-of-arrays work buffers (tracker index last), runs each
+step of the IMM cycle as loops whose innermost loop runs over the ``W`` trackers of the
+chunk — which LLVM turns into SIMD code, each lane one tracker — and scatters the results
+back. All work buffers are allocated once per call.
 
-Shapes: ``B`` trackers, ``M`` modes, ``n`` states, ``m`` measurement components.
+Determinism: no ``fastmath`` (so no reassociation and no FMA contraction) and no parallel
+reduction. Every lane does the same sequence of IEEE operations on its own tracker's data
+(``exp``/``log`` are scalar libm calls per tracker), so a tracker's result is the same bits
+whichever chunk or lane it lands in, whatever the batch, run after run. Lanes past the end
+of the batch in the last chunk are padded with a copy of a valid tracker and discarded.
 
-Transition matrices are passed as a dense ``(M, n, n)`` array *and* as a per-mode list of
-their non-zero entries (row-major, ``nnz`` entries each, padded): the coordinated-turn
-matrices are mostly zeros, and ``F P Fᵀ`` only over the non-zeros is 2–3× cheaper. The
-measurement matrix is handled the same way.
+Transition matrices are also passed as the list of their non-zero entries: the
+coordinated-turn matrices are mostly zeros, and ``F P Fᵀ`` over the non-zeros only is 2–3×
+cheaper. The measurement matrix is handled the same way.
 """
 
 from __future__ import annotations
@@ -23,361 +28,448 @@ from numba import njit
 
 _LOG_2PI = math.log(2.0 * math.pi)
 
+#: Trackers per chunk (SIMD lanes × unroll); a multiple of 8.
+CHUNK = 32
 
-@njit(cache=True)
-def _inv_logdet(S, Si, L, Li, m):
-    """Inverse ``Si`` and ``log det`` of the symmetric positive definite ``S`` (m, m).
 
-    Closed form for m = 1, 2; Cholesky otherwise (``L``, ``Li`` are (m, m) work arrays).
-    Returns ``log det S``, or NaN if ``S`` is not positive definite.
-    """
+@njit(cache=True, error_model="numpy")
+def _inv_logdet(S, Si, logdet, L, Li, want_log):
+    """For each lane w of S (m, m, W), symmetric positive definite, its inverse Si (m, m, W)
+    and (if ``want_log``) log-determinant logdet (W,); NaN in ``logdet`` where S is not
+    positive definite. Closed form for m ≤ 2, Cholesky otherwise (L, Li: (m, m, W) work
+    arrays)."""
+    m = S.shape[0]
+    W = S.shape[2]
     if m == 1:
-        s = S[0, 0]
-        if not (s > 0.0):
-            return np.nan
-        Si[0, 0] = 1.0 / s
-        return math.log(s)
-    if m == 2:
-        a = S[0, 0]
-        b = S[0, 1]
-        d = S[1, 1]
-        det = a * d - b * b
-        if not (det > 0.0 and a > 0.0):
-            return np.nan
-        Si[0, 0] = d / det
-        Si[0, 1] = -b / det
-        Si[1, 0] = -b / det
-        Si[1, 1] = a / det
-        return math.log(det)
-    # Cholesky S = L Lᵀ
-    logdet = 0.0
-    for i in range(m):
-        for j in range(i + 1):
-            s = S[i, j]
-            for k in range(j):
-                s -= L[i, k] * L[j, k]
-            if i == j:
-                if not (s > 0.0):
-                    return np.nan
-                L[i, i] = math.sqrt(s)
-                logdet += 2.0 * math.log(L[i, i])
-            else:
-                L[i, j] = s / L[j, j]
-        for j in range(i + 1, m):
-            L[i, j] = 0.0
-    # Li = L⁻¹ (lower triangular)
-    for i in range(m):
-        for j in range(m):
-            Li[i, j] = 0.0
-    for i in range(m):
-        Li[i, i] = 1.0 / L[i, i]
-        for j in range(i):
-            s = 0.0
-            for k in range(j, i):
-                s -= L[i, k] * Li[k, j]
-            Li[i, j] = s / L[i, i]
-    # Si = Liᵀ Li (symmetric)
-    for i in range(m):
-        for j in range(i, m):
-            s = 0.0
-            for k in range(j, m):
-                s += Li[k, i] * Li[k, j]
-            Si[i, j] = s
-            Si[j, i] = s
-    return logdet
+        for w in range(W):
+            s = S[0, 0, w]
+            Si[0, 0, w] = 1.0 / s
+            if want_log:
+                logdet[w] = math.log(s) if s > 0.0 else np.nan
+    elif m == 2:
+        for w in range(W):
+            a = S[0, 0, w]
+            b = S[0, 1, w]
+            d = S[1, 1, w]
+            det = a * d - b * b
+            Si[0, 0, w] = d / det
+            Si[0, 1, w] = -b / det
+            Si[1, 0, w] = -b / det
+            Si[1, 1, w] = a / det
+            if want_log:
+                logdet[w] = math.log(det) if (det > 0.0 and a > 0.0) else np.nan
+    else:
+        for w in range(W):
+            logdet[w] = 0.0
+        for i in range(m):
+            for j in range(i + 1):
+                for w in range(W):
+                    s = S[i, j, w]
+                    for k in range(j):
+                        s -= L[i, k, w] * L[j, k, w]
+                    if i == j:
+                        if s > 0.0:
+                            L[i, i, w] = math.sqrt(s)
+                        else:
+                            L[i, i, w] = np.nan
+                    else:
+                        L[i, j, w] = s / L[j, j, w]
+            if want_log:
+                for w in range(W):
+                    logdet[w] += 2.0 * math.log(L[i, i, w]) if L[i, i, w] > 0.0 else np.nan
+        # Li = L⁻¹ (lower triangular), Si = Liᵀ Li
+        for i in range(m):
+            for w in range(W):
+                Li[i, i, w] = 1.0 / L[i, i, w]
+            for j in range(i):
+                for w in range(W):
+                    s = 0.0
+                    for k in range(j, i):
+                        s -= L[i, k, w] * Li[k, j, w]
+                    Li[i, j, w] = s / L[i, i, w]
+        for i in range(m):
+            for j in range(i, m):
+                for w in range(W):
+                    s = 0.0
+                    for k in range(j, m):
+                        s += Li[k, i, w] * Li[k, j, w]
+                    Si[i, j, w] = s
+                    Si[j, i, w] = s
 
 
-@njit(cache=True)
-def imm_step(
-    F, Fr, Fc, Fv, Fnnz, Q, U, H, Hr, Hc, Hv, R, Pi, gate_d2,
-    z, xm, Pm, mu,
-    xm_o, Pm_o, mu_o, x_o, P_o, nis_o, ll_o, gated_o,
-):  # fmt: skip
-    """One IMM cycle (paper §IV, steps 1–5) for every tracker.
+def _make_imm_step(M, n, m, W):
+    """Compile the IMM step for fixed (M, n, m) and chunk width W (closure variables are
+    compile-time constants for numba, so the small loops have constant trip counts)."""
 
-    Model
-    -----
-    F (M, n, n), Q (M, n, n) symmetric, U (M, n) offsets, H (m, n), R (m, m) symmetric PD,
-    Pi (M, M) row-stochastic, gate_d2 scalar (chi-square gate on d², ``inf`` = no gate).
-    Fr, Fc, Fv (M, K): row, column, value of the non-zeros of each F[j] (first Fnnz[j]).
-    Hr, Hc, Hv (KH,): the non-zeros of H.
+    @njit(cache=True, error_model="numpy")
+    def imm_step(
+        Fr, Fc, Fv, Fnnz, Q, U, Hr, Hc, Hv, R, Pi, gate_d2,
+        z, xm, Pm, mu,
+        xm_o, Pm_o, mu_o, x_o, P_o, nis_o, ll_o, gated_o,
+    ):  # fmt: skip
+        """One IMM cycle (paper §IV, steps 1–5) for every tracker.
 
-    State in (read only): z (B, m), xm (B, M, n), Pm (B, M, n, n), mu (B, M).
-    State out (written): xm_o, Pm_o, mu_o, x_o (B, n), P_o (B, n, n), nis_o (B,),
-    ll_o (B, M), gated_o (B,) bool. Outputs must not alias inputs.
-    """
-    B = xm.shape[0]
-    M = xm.shape[1]
-    n = xm.shape[2]
-    m = H.shape[0]
-    nH = Hr.shape[0]
+        Model: Fr, Fc, Fv (M, K) row, column and value of the non-zeros of each F_j (the
+        first Fnnz[j] of them); Q (M, n, n) symmetric; U (M, n) offsets; Hr, Hc, Hv (KH,)
+        the non-zeros of H (m, n); R (m, m) symmetric positive definite; Pi (M, M)
+        row-stochastic; gate_d2 the chi-square gate on d² (``inf``: no gate).
 
-    cbar = np.empty(M)
-    logc = np.empty(M)
-    om = np.empty((M, M))
-    x0 = np.empty(n)
-    P0 = np.empty((n, n))
-    d = np.empty(n)
-    FP = np.empty((n, n))
-    zh = np.empty((M, m))
-    nu = np.empty((M, m))
-    S = np.empty((M, m, m))
-    Si = np.empty((M, m, m))
-    PHt = np.empty((M, n, m))
-    d2 = np.empty(M)
-    lw = np.empty(M)
-    K = np.empty((n, m))
-    A = np.empty((n, n))
-    AP = np.empty((n, n))
-    KR = np.empty((n, m))
-    L = np.empty((m, m))
-    Li = np.empty((m, m))
-    zbar = np.empty(m)
-    Sbar = np.empty((m, m))
-    Sbi = np.empty((m, m))
-    dz = np.empty(m)
-    half_m_log2pi = 0.5 * m * _LOG_2PI
+        In (read only): z (B, m), xm (B, M, n), Pm (B, M, n, n), mu (B, M).
+        Out (written, must not alias the inputs): xm_o, Pm_o, mu_o, x_o (B, n),
+        P_o (B, n, n), nis_o (B,), ll_o (B, M), gated_o (B,) bool.
+        """
+        B = xm.shape[0]
+        nH = Hr.shape[0]
+        half_m_log2pi = 0.5 * m * _LOG_2PI
 
-    for b in range(B):
-        # ---- Step 1: mixing probabilities  μ_{i|j} = π_ij μ_i / c̄_j,  c̄_j = Σ_i π_ij μ_i
-        for j in range(M):
-            s = 0.0
-            for i in range(M):
-                s += Pi[i, j] * mu[b, i]
-            cbar[j] = s
-        for j in range(M):
-            if cbar[j] > 0.0:
+        mu_c = np.empty((M, W))
+        cbar = np.empty((M, W))
+        om = np.empty((M, M, W))
+        X = np.empty((M, n, W))
+        Pin = np.empty((M, n, n, W))
+        x0 = np.empty((n, W))
+        P0 = np.empty((n, n, W))
+        XP = np.empty((M, n, W))
+        PP = np.empty((M, n, n, W))
+        FP = np.empty((n, n, W))
+        zc = np.empty((m, W))
+        have = np.empty(W, dtype=np.bool_)
+        use = np.empty(W, dtype=np.bool_)
+        zh = np.empty((M, m, W))
+        nu = np.empty((M, m, W))
+        PHt = np.empty((M, n, m, W))
+        S = np.empty((M, m, m, W))
+        Si = np.empty((M, m, m, W))
+        logdet = np.empty((M, W))
+        d2 = np.empty((M, W))
+        ll = np.empty((M, W))
+        K = np.empty((n, m, W))
+        AP = np.empty((n, n, W))
+        G = np.empty((n, m, W))
+        L = np.empty((m, m, W))
+        Li = np.empty((m, m, W))
+        zbar = np.empty((m, W))
+        dz = np.empty((m, W))
+        Sbar = np.empty((m, m, W))
+        Sbi = np.empty((m, m, W))
+        ldb = np.empty(W)
+        nis = np.empty(W)
+        mun = np.empty((M, W))
+        xc = np.empty((n, W))
+        Pc = np.empty((n, n, W))
+
+        for b0 in range(0, B, W):
+            nb = min(W, B - b0)
+            # ---- gather the chunk (lanes past the end: copies of the chunk's first tracker)
+            for w in range(W):
+                b = b0 + w if w < nb else b0
                 for i in range(M):
-                    om[i, j] = (Pi[i, j] * mu[b, i]) / cbar[j]
-            else:  # mode j unreachable: keep its own estimate (its μ stays 0)
-                for i in range(M):
-                    om[i, j] = 1.0 if i == j else 0.0
+                    mu_c[i, w] = mu[b, i]
+                    for k in range(n):
+                        X[i, k, w] = xm[b, i, k]
+                        for l in range(k, n):
+                            Pin[i, k, l, w] = Pm[b, i, k, l]
+                ok = True
+                for a in range(m):
+                    zc[a, w] = z[b, a]
+                    if not math.isfinite(zc[a, w]):
+                        ok = False
+                have[w] = ok
 
-        for j in range(M):
-            # ---- Step 2: mixed initial condition x0j = Σ_i μ_{i|j} x_i,
-            #      P0j = Σ_i μ_{i|j} (P_i + (x_i − x0j)(x_i − x0j)ᵀ)
-            for k in range(n):
-                s = 0.0
+            # ---- Step 1: mixing probabilities μ_{i|j} = π_ij μ_i / c̄_j, c̄_j = Σ_i π_ij μ_i
+            for j in range(M):
+                for w in range(W):
+                    cbar[j, w] = 0.0
                 for i in range(M):
-                    s += xm[b, i, k] * om[i, j]
-                x0[k] = s
-            for k in range(n):
-                for l in range(k, n):
-                    P0[k, l] = 0.0
-            for i in range(M):
-                w = om[i, j]
-                if w == 0.0:
-                    continue
+                    p = Pi[i, j]
+                    for w in range(W):
+                        cbar[j, w] += p * mu_c[i, w]
+                for i in range(M):
+                    p = Pi[i, j]
+                    e = 1.0 if i == j else 0.0
+                    for w in range(W):
+                        c = cbar[j, w]
+                        # an unreachable mode (c̄_j = 0) keeps its own estimate; its μ stays 0
+                        om[i, j, w] = (p * mu_c[i, w]) / c if c > 0.0 else e
+
+            for j in range(M):
+                # ---- Step 2: mixed initial conditions x0j = Σ_i μ_{i|j} x_i,
+                #      P0j = Σ_i μ_{i|j} [P_i + (x_i − x0j)(x_i − x0j)ᵀ]   (upper triangle)
                 for k in range(n):
-                    d[k] = xm[b, i, k] - x0[k]
+                    for w in range(W):
+                        x0[k, w] = 0.0
+                    for i in range(M):
+                        for w in range(W):
+                            x0[k, w] += X[i, k, w] * om[i, j, w]
                 for k in range(n):
                     for l in range(k, n):
-                        P0[k, l] += w * (d[k] * d[l] + Pm[b, i, k, l])
-            for k in range(n):
-                for l in range(k):
-                    P0[k, l] = P0[l, k]
-
-            # ---- Step 3a: mode-matched prediction  x = F_j x0j + u_j,  P = F_j P0j F_jᵀ + Q_j
-            for k in range(n):
-                xm_o[b, j, k] = U[j, k]
-                for l in range(n):
-                    FP[k, l] = 0.0
-            for e in range(Fnnz[j]):
-                r = Fr[j, e]
-                c = Fc[j, e]
-                v = Fv[j, e]
-                xm_o[b, j, r] += v * x0[c]
-                for l in range(n):
-                    FP[r, l] += v * P0[c, l]
-            for k in range(n):
-                for l in range(k, n):
-                    Pm_o[b, j, k, l] = 0.0
-            # (F P Fᵀ)[k, l] = Σ_e F[l, c_e] FP[k, c_e] over non-zeros (l = r_e), upper triangle
-            for e in range(Fnnz[j]):
-                r = Fr[j, e]
-                c = Fc[j, e]
-                v = Fv[j, e]
-                for k in range(r + 1):
-                    Pm_o[b, j, k, r] += FP[k, c] * v
-            for k in range(n):
-                for l in range(k, n):
-                    Pm_o[b, j, k, l] += Q[j, k, l]
-                for l in range(k):
-                    Pm_o[b, j, k, l] = Pm_o[b, j, l, k]
-
-        have_z = True
-        for a in range(m):
-            if not math.isfinite(z[b, a]):
-                have_z = False
-        gated = False
-        if have_z:
-            # ---- Step 3b: innovations, S_j = H P_j Hᵀ + R, d²_j, log N(z; ẑ_j, S_j)
-            all_out = True
-            for j in range(M):
-                for k in range(n):
-                    for a in range(m):
-                        PHt[j, k, a] = 0.0
-                for a in range(m):
-                    zh[j, a] = 0.0
-                for e in range(nH):
-                    a = Hr[e]
-                    c = Hc[e]
-                    v = Hv[e]
-                    zh[j, a] += v * xm_o[b, j, c]
+                        for w in range(W):
+                            P0[k, l, w] = 0.0
+                for i in range(M):
                     for k in range(n):
-                        PHt[j, k, a] += Pm_o[b, j, k, c] * v
-                for a in range(m):
-                    for a2 in range(a, m):
-                        S[j, a, a2] = R[a, a2]
-                for e in range(nH):
-                    a = Hr[e]
-                    c = Hc[e]
-                    v = Hv[e]
-                    for a2 in range(a, m):
-                        S[j, a, a2] += v * PHt[j, c, a2]
-                for a in range(m):
-                    for a2 in range(a):
-                        S[j, a, a2] = S[j, a2, a]
-                logdet = _inv_logdet(S[j], Si[j], L, Li, m)
-                for a in range(m):
-                    nu[j, a] = z[b, a] - zh[j, a]
-                q = 0.0
-                for a in range(m):
-                    s = 0.0
-                    for a2 in range(m):
-                        s += Si[j, a, a2] * nu[j, a2]
-                    q += nu[j, a] * s
-                d2[j] = q
-                ll_o[b, j] = -0.5 * (q + logdet) - half_m_log2pi
-                # gated unless some reachable mode (c̄_j > 0) explains z (NaN d² explains nothing)
-                if q <= gate_d2 and cbar[j] > 0.0:
-                    all_out = False
-            gated = all_out
-            # mixture (moment-matched) innovation NIS with the predicted mode probabilities c̄
-            for a in range(m):
-                s = 0.0
-                for j in range(M):
-                    s += cbar[j] * zh[j, a]
-                zbar[a] = s
-            for a in range(m):
-                for a2 in range(a, m):
-                    Sbar[a, a2] = 0.0
-            for j in range(M):
-                for a in range(m):
-                    dz[a] = zh[j, a] - zbar[a]
-                for a in range(m):
-                    for a2 in range(a, m):
-                        Sbar[a, a2] += cbar[j] * (S[j, a, a2] + dz[a] * dz[a2])
-            for a in range(m):
-                for a2 in range(a):
-                    Sbar[a, a2] = Sbar[a2, a]
-                dz[a] = z[b, a] - zbar[a]
-            _inv_logdet(Sbar, Sbi, L, Li, m)
-            q = 0.0
-            for a in range(m):
-                s = 0.0
-                for a2 in range(m):
-                    s += Sbi[a, a2] * dz[a2]
-                q += dz[a] * s
-            nis_o[b] = q
-        else:
-            for j in range(M):
-                ll_o[b, j] = np.nan
-            nis_o[b] = np.nan
-        gated_o[b] = gated
-
-        if have_z and not gated:
-            for j in range(M):
-                # ---- Step 3c: mode-matched update, K = P Hᵀ S⁻¹, x += K ν,
-                #      Joseph form P = (I − K H) P (I − K H)ᵀ + K R Kᵀ, symmetrised
-                for k in range(n):
-                    for a in range(m):
-                        s = 0.0
-                        for a2 in range(m):
-                            s += PHt[j, k, a2] * Si[j, a2, a]
-                        K[k, a] = s
-                for k in range(n):
-                    s = 0.0
-                    for a in range(m):
-                        s += K[k, a] * nu[j, a]
-                    xm_o[b, j, k] += s
-                for k in range(n):
-                    for l in range(n):
-                        A[k, l] = 1.0 if k == l else 0.0
-                for e in range(nH):
-                    a = Hr[e]
-                    c = Hc[e]
-                    v = Hv[e]
-                    for k in range(n):
-                        A[k, c] -= K[k, a] * v
-                for k in range(n):
-                    for l in range(n):
-                        s = 0.0
-                        for i in range(n):
-                            s += A[k, i] * Pm_o[b, j, i, l]
-                        AP[k, l] = s
-                for k in range(n):
-                    for a in range(m):
-                        s = 0.0
-                        for a2 in range(m):
-                            s += K[k, a2] * R[a2, a]
-                        KR[k, a] = s
-                for k in range(n):
-                    for l in range(k, n):
-                        s = 0.0
-                        for i in range(n):
-                            s += AP[k, i] * A[l, i]
-                        t = 0.0
-                        for a in range(m):
-                            t += KR[k, a] * K[l, a]
-                        Pm_o[b, j, k, l] = s + t
+                        for l in range(k, n):
+                            for w in range(W):
+                                P0[k, l, w] += om[i, j, w] * (
+                                    (X[i, k, w] - x0[k, w]) * (X[i, l, w] - x0[l, w]) + Pin[i, k, l, w]
+                                )
                 for k in range(n):
                     for l in range(k):
-                        Pm_o[b, j, k, l] = Pm_o[b, j, l, k]
-            # ---- Step 4: mode probabilities μ_j ∝ Λ_j c̄_j, in log space (log-sum-exp)
-            mx = -np.inf
-            for j in range(M):
-                if cbar[j] > 0.0:
-                    lw[j] = ll_o[b, j] + math.log(cbar[j])
-                else:
-                    lw[j] = -np.inf
-                if lw[j] > mx:
-                    mx = lw[j]
-            s = 0.0
-            for j in range(M):
-                s += math.exp(lw[j] - mx)
-            lse = mx + math.log(s)
-            for j in range(M):
-                mu_o[b, j] = math.exp(lw[j] - lse)
-        else:
-            # no (usable) measurement: predict only, μ = c̄
-            for j in range(M):
-                mu_o[b, j] = cbar[j]
+                        for w in range(W):
+                            P0[k, l, w] = P0[l, k, w]
 
-        # ---- Step 5: combination x = Σ_j μ_j x_j,  P = Σ_j μ_j (P_j + (x_j − x)(x_j − x)ᵀ)
-        for k in range(n):
-            s = 0.0
+                # ---- Step 3a: mode-matched prediction x_j = F_j x0j + u_j,
+                #      P_j = F_j P0j F_jᵀ + Q_j, over the non-zeros of F_j
+                for k in range(n):
+                    u = U[j, k]
+                    for w in range(W):
+                        XP[j, k, w] = u
+                    for l in range(n):
+                        for w in range(W):
+                            FP[k, l, w] = 0.0
+                for e in range(Fnnz[j]):
+                    r = Fr[j, e]
+                    c = Fc[j, e]
+                    v = Fv[j, e]
+                    for w in range(W):
+                        XP[j, r, w] += v * x0[c, w]
+                    for l in range(n):
+                        for w in range(W):
+                            FP[r, l, w] += v * P0[c, l, w]
+                for k in range(n):
+                    for l in range(k, n):
+                        for w in range(W):
+                            PP[j, k, l, w] = 0.0
+                # (F P Fᵀ)[k, r] = Σ_e F[r, c_e] (F P)[k, c_e], upper triangle k ≤ r
+                for e in range(Fnnz[j]):
+                    r = Fr[j, e]
+                    c = Fc[j, e]
+                    v = Fv[j, e]
+                    for k in range(r + 1):
+                        for w in range(W):
+                            PP[j, k, r, w] += FP[k, c, w] * v
+                for k in range(n):
+                    for l in range(k, n):
+                        q = Q[j, k, l]
+                        for w in range(W):
+                            PP[j, k, l, w] += q
+                    for l in range(k):
+                        for w in range(W):
+                            PP[j, k, l, w] = PP[j, l, k, w]
+
+                # ---- Step 3b: ẑ_j = H x_j, P_j Hᵀ, S_j = H P_j Hᵀ + R, over the non-zeros of H
+                for a in range(m):
+                    for w in range(W):
+                        zh[j, a, w] = 0.0
+                    for k in range(n):
+                        for w in range(W):
+                            PHt[j, k, a, w] = 0.0
+                for e in range(nH):
+                    a = Hr[e]
+                    c = Hc[e]
+                    v = Hv[e]
+                    for w in range(W):
+                        zh[j, a, w] += v * XP[j, c, w]
+                    for k in range(n):
+                        for w in range(W):
+                            PHt[j, k, a, w] += PP[j, k, c, w] * v
+                for a in range(m):
+                    for a2 in range(a, m):
+                        rr = R[a, a2]
+                        for w in range(W):
+                            S[j, a, a2, w] = rr
+                for e in range(nH):
+                    a = Hr[e]
+                    c = Hc[e]
+                    v = Hv[e]
+                    for a2 in range(a, m):
+                        for w in range(W):
+                            S[j, a, a2, w] += v * PHt[j, c, a2, w]
+                for a in range(m):
+                    for a2 in range(a):
+                        for w in range(W):
+                            S[j, a, a2, w] = S[j, a2, a, w]
+                _inv_logdet(S[j], Si[j], logdet[j], L, Li, True)
+                # innovation ν_j = z − ẑ_j, d²_j = ν_jᵀ S_j⁻¹ ν_j, log N(z; ẑ_j, S_j)
+                for a in range(m):
+                    for w in range(W):
+                        nu[j, a, w] = zc[a, w] - zh[j, a, w]
+                for w in range(W):
+                    d2[j, w] = 0.0
+                for a in range(m):
+                    for a2 in range(m):
+                        for w in range(W):
+                            d2[j, w] += nu[j, a, w] * Si[j, a, a2, w] * nu[j, a2, w]
+                for w in range(W):
+                    ll[j, w] = -0.5 * (d2[j, w] + logdet[j, w]) - half_m_log2pi
+
+            # ---- gate: the measurement is used unless no reachable mode explains it
+            for w in range(W):
+                g = True
+                for j in range(M):
+                    if d2[j, w] <= gate_d2 and cbar[j, w] > 0.0:
+                        g = False
+                use[w] = have[w] and not g
+                gated_o_w = have[w] and g
+                if w < nb:
+                    gated_o[b0 + w] = gated_o_w
+
+            # ---- mixture innovation NIS with the predicted mode probabilities c̄
+            for a in range(m):
+                for w in range(W):
+                    zbar[a, w] = 0.0
+                for j in range(M):
+                    for w in range(W):
+                        zbar[a, w] += cbar[j, w] * zh[j, a, w]
+            for a in range(m):
+                for a2 in range(a, m):
+                    for w in range(W):
+                        Sbar[a, a2, w] = 0.0
             for j in range(M):
-                s += xm_o[b, j, k] * mu_o[b, j]
-            x_o[b, k] = s
-        for k in range(n):
-            for l in range(k, n):
-                P_o[b, k, l] = 0.0
-        for j in range(M):
-            w = mu_o[b, j]
-            if w == 0.0:
-                continue
+                for a in range(m):
+                    for a2 in range(a, m):
+                        for w in range(W):
+                            Sbar[a, a2, w] += cbar[j, w] * (
+                                S[j, a, a2, w] + (zh[j, a, w] - zbar[a, w]) * (zh[j, a2, w] - zbar[a2, w])
+                            )
+            for a in range(m):
+                for a2 in range(a):
+                    for w in range(W):
+                        Sbar[a, a2, w] = Sbar[a2, a, w]
+                for w in range(W):
+                    dz[a, w] = zc[a, w] - zbar[a, w]
+            _inv_logdet(Sbar, Sbi, ldb, L, Li, False)
+            for w in range(W):
+                nis[w] = 0.0
+            for a in range(m):
+                for a2 in range(m):
+                    for w in range(W):
+                        nis[w] += dz[a, w] * Sbi[a, a2, w] * dz[a2, w]
+
+            # ---- Step 3c: mode-matched update where the measurement is used:
+            #      K = P Hᵀ S⁻¹, x += K ν, Joseph form P = (I − K H) P (I − K H)ᵀ + K R Kᵀ
+            for j in range(M):
+                for k in range(n):
+                    for a in range(m):
+                        for w in range(W):
+                            K[k, a, w] = 0.0
+                        for a2 in range(m):
+                            for w in range(W):
+                                K[k, a, w] += PHt[j, k, a2, w] * Si[j, a2, a, w]
+                for k in range(n):
+                    for w in range(W):
+                        s = 0.0
+                        for a in range(m):
+                            s += K[k, a, w] * nu[j, a, w]
+                        XP[j, k, w] = XP[j, k, w] + s if use[w] else XP[j, k, w]
+                # (I − K H) P = P − K (H P), with H P = (P Hᵀ)ᵀ as P is symmetric
+                for k in range(n):
+                    for l in range(n):
+                        for w in range(W):
+                            s = PP[j, k, l, w]
+                            for a in range(m):
+                                s -= K[k, a, w] * PHt[j, l, a, w]
+                            AP[k, l, w] = s
+                # G = K R − ((I − K H) P) Hᵀ; then P = (I − K H) P + G Kᵀ, which is
+                # (I − K H) P (I − K H)ᵀ + K R Kᵀ
+                for k in range(n):
+                    for a in range(m):
+                        for w in range(W):
+                            G[k, a, w] = 0.0
+                for e in range(nH):
+                    a = Hr[e]
+                    c = Hc[e]
+                    v = Hv[e]
+                    for k in range(n):
+                        for w in range(W):
+                            G[k, a, w] -= AP[k, c, w] * v
+                for k in range(n):
+                    for a in range(m):
+                        for a2 in range(m):
+                            rr = R[a2, a]
+                            for w in range(W):
+                                G[k, a, w] += K[k, a2, w] * rr
+                for k in range(n):
+                    for l in range(k, n):
+                        for w in range(W):
+                            s = AP[k, l, w]
+                            for a in range(m):
+                                s += G[k, a, w] * K[l, a, w]
+                            PP[j, k, l, w] = s if use[w] else PP[j, k, l, w]
+                    for l in range(k):
+                        for w in range(W):
+                            PP[j, k, l, w] = PP[j, l, k, w]
+
+            # ---- Step 4: mode probabilities μ_j = c̄_j Λ_j / Σ_l c̄_l Λ_l, with the likelihoods
+            #      scaled by the largest one, exp(log Λ_j − max_l log Λ_l), so none underflows
+            #      unless it is negligible; c̄ where the measurement is missing or gated.
+            for w in range(W):
+                if use[w]:
+                    mx = -np.inf
+                    for j in range(M):
+                        if cbar[j, w] > 0.0 and ll[j, w] > mx:
+                            mx = ll[j, w]
+                    s = 0.0
+                    for j in range(M):
+                        c = cbar[j, w]
+                        e = c * math.exp(ll[j, w] - mx) if c > 0.0 else 0.0
+                        mun[j, w] = e
+                        s += e
+                    for j in range(M):
+                        mun[j, w] = mun[j, w] / s
+                else:
+                    for j in range(M):
+                        mun[j, w] = cbar[j, w]
+
+            # ---- Step 5: combination x = Σ_j μ_j x_j, P = Σ_j μ_j [P_j + (x_j − x)(x_j − x)ᵀ]
             for k in range(n):
-                d[k] = xm_o[b, j, k] - x_o[b, k]
+                for w in range(W):
+                    xc[k, w] = 0.0
+                for j in range(M):
+                    for w in range(W):
+                        xc[k, w] += XP[j, k, w] * mun[j, w]
             for k in range(n):
                 for l in range(k, n):
-                    P_o[b, k, l] += w * (d[k] * d[l] + Pm_o[b, j, k, l])
-        for k in range(n):
-            for l in range(k):
-                P_o[b, k, l] = P_o[b, l, k]
+                    for w in range(W):
+                        Pc[k, l, w] = 0.0
+            for j in range(M):
+                for k in range(n):
+                    for l in range(k, n):
+                        for w in range(W):
+                            Pc[k, l, w] += mun[j, w] * (
+                                (XP[j, k, w] - xc[k, w]) * (XP[j, l, w] - xc[l, w]) + PP[j, k, l, w]
+                            )
+
+            # ---- scatter the chunk
+            for w in range(nb):
+                b = b0 + w
+                nis_o[b] = nis[w] if have[w] else np.nan
+                for j in range(M):
+                    mu_o[b, j] = mun[j, w]
+                    ll_o[b, j] = ll[j, w] if have[w] else np.nan
+                    for k in range(n):
+                        xm_o[b, j, k] = XP[j, k, w]
+                        for l in range(n):
+                            Pm_o[b, j, k, l] = PP[j, k, l, w]
+                for k in range(n):
+                    x_o[b, k] = xc[k, w]
+                    for l in range(n):
+                        P_o[b, k, l] = Pc[k, l, w] if l >= k else Pc[l, k, w]
+
+    return imm_step
 
 
-@njit(cache=True)
+_STEP_KERNELS: dict = {}
+
+
+def imm_step_kernel(M: int, n: int, m: int, chunk: int = CHUNK):
+    """The IMM step kernel compiled for ``M`` modes, ``n`` states, ``m`` measurements."""
+    key = (int(M), int(n), int(m), int(chunk))
+    if key not in _STEP_KERNELS:
+        _STEP_KERNELS[key] = _make_imm_step(*key)
+    return _STEP_KERNELS[key]
+
+
+@njit(cache=True, error_model="numpy")
 def predict_modes(F, Q, U, xm, Pm, steps, xs, Ps):
     """Each mode's own model propagated 1..steps steps ahead (no mixing).
 

@@ -202,6 +202,7 @@ class IMM:
         #: chi-square threshold on d² (inf = no gating)
         self.gate_threshold = gate_d2
         self.M, self.n, self.m = M, n, m
+        self._kernel = _kernels.imm_step_kernel(M, n, m)
 
         x0, P0, mu0 = self._initial(x0, P0, mu0, "")
         B = x0.shape[0]
@@ -326,9 +327,9 @@ class IMM:
         nis = np.empty(B)
         ll = np.empty((B, M))
         gated = np.empty(B, dtype=np.bool_)
-        _kernels.imm_step(
-            self._F, self._Fr, self._Fc, self._Fv, self._Fnnz, self._Q, self._U,
-            self._H, self._Hr, self._Hc, self._Hv, self._R, self._Pi, self.gate_threshold,
+        self._kernel(
+            self._Fr, self._Fc, self._Fv, self._Fnnz, self._Q, self._U,
+            self._Hr, self._Hc, self._Hv, self._R, self._Pi, self.gate_threshold,
             z, self._xm, self._Pm, self._mu,
             xm, Pm, mu, x, P, nis, ll, gated,
         )  # fmt: skip
