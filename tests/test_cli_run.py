@@ -113,6 +113,14 @@ def test_gif_needs_render(tmp_path):
     assert_one_line_error(cli("run", "head_on", "--gif", cwd=tmp_path), "--gif needs --render")
 
 
+@needs_world
+@pytest.mark.skipif(importlib.util.find_spec("imageio_ffmpeg") is not None, reason="ffmpeg is installed")
+def test_mp4_without_ffmpeg_is_one_line(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    proc = main_in_process(capsys, "run", "head_on", "--steps", "1", "--render", "out", "--mp4")
+    assert_one_line_error(proc, "--mp4 needs", "imageio-ffmpeg")
+
+
 def test_list(tmp_path):
     proc = cli("run", "--list", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr

@@ -185,7 +185,8 @@ class _Frames:
 
                 self._mp4 = iio2.get_writer(directory / "run.mp4", fps=fps, macro_block_size=1)
             except (ImportError, ValueError, RuntimeError) as exc:
-                raise UserError(f"--mp4 needs the ffmpeg plugin of imageio (pip install imageio-ffmpeg): {exc}") from None
+                first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+                raise UserError(f"--mp4 needs the ffmpeg plugin of imageio (pip install imageio-ffmpeg): {first}") from None
 
     def add(self, snapshot: dict) -> None:
         import imageio.v3 as iio
