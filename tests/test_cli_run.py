@@ -16,6 +16,15 @@ from airspace_sim.commands import run as run_cmd
 
 REPO = Path(__file__).resolve().parent.parent
 
+try:
+    from airspace_sim.world import World  # noqa: F401
+
+    world_ready = True
+except ImportError:
+    world_ready = False
+renderer_ready = importlib.util.find_spec("airspace_sim.rendering.renderer") is not None
+needs_world = pytest.mark.skipif(not world_ready, reason="airspace_sim.world.World not written yet")
+
 
 def cli(*args, cwd=None, env=None, timeout=120):
     """Run ``python -m airspace_sim`` in a subprocess; returns the CompletedProcess."""
@@ -146,14 +155,6 @@ def test_jsonable_and_table():
 
 # --------------------------------------------------------------------------- real runs
 
-try:
-    from airspace_sim.world import World  # noqa: F401
-
-    world_ready = True
-except ImportError:
-    world_ready = False
-renderer_ready = importlib.util.find_spec("airspace_sim.rendering.renderer") is not None
-needs_world = pytest.mark.skipif(not world_ready, reason="airspace_sim.world.World not written yet")
 
 
 def _summary_without_timing(path):
