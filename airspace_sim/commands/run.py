@@ -180,10 +180,14 @@ class _Frames:
         self.paths: list[Path] = []
         self._mp4 = None
         if video == "mp4":
+            import warnings
+
             try:
                 import imageio.v2 as iio2
 
-                self._mp4 = iio2.get_writer(directory / "run.mp4", fps=fps, macro_block_size=1)
+                with warnings.catch_warnings():  # imageio's legacy plugin list warns on import
+                    warnings.simplefilter("ignore", DeprecationWarning)
+                    self._mp4 = iio2.get_writer(directory / "run.mp4", fps=fps, macro_block_size=1)
             except (ImportError, ValueError, RuntimeError) as exc:
                 first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
                 raise UserError(f"--mp4 needs the ffmpeg plugin of imageio (pip install imageio-ffmpeg): {first}") from None
