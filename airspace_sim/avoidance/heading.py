@@ -47,7 +47,7 @@ def _solve_cos_sin(a, b, c):
 
 
 def tangent_direction(rel_position, r_safe, side):
-    """Unit direction of the tangent from ``B`` to the safety circle on ``side``, shape ``(..., 2)``.
+    """Unit direction ``(..., 2)`` of the tangent from ``B`` to the safety circle on ``side``.
 
     ``side = +1``: the line of sight ``BO`` rotated CCW by ``β``; ``−1``: clockwise by ``β``
     (``β = asin(R/|B|)``, ``π/2`` when inside). ``B = 0`` uses the line of sight ``(−1, 0)``.
@@ -137,7 +137,7 @@ def tangent_heading_change(own_velocity, intruder_velocity, rel_position, r_safe
 
 
 def range_at_time_heading_changes(own_velocity, intruder_velocity, rel_position, radius, t):
-    """Heading changes ``ψ`` with ``|B + t·v_rel(ψ)| = radius`` at time ``t`` > 0, shape ``(..., 2)``.
+    """Heading changes ``ψ`` (..., 2) with ``|B + t·v_rel(ψ)| = radius`` at time ``t > 0``.
 
     With ``P = B + t·v_i`` the condition ``|P − t·R(ψ)v_o|² = radius²`` is
     ``P·R(ψ)v_o = (|P|² + t²|v_o|² − radius²) / (2t)``: again ``a cos ψ + b sin ψ = c``.
