@@ -276,3 +276,16 @@ def test_bench_world_accepts_a_number(monkeypatch, capsys):
     proc = main_in_process(capsys, "bench-world", "--sizes", "10", "20", "--trackers", "off")
     assert proc.returncode == 0, proc.stderr
     assert "time per step ×2.00, growth exponent 1.00" in proc.stdout
+
+
+@pytest.mark.skipif(importlib.util.find_spec("airspace_sim.world.benchmark") is None,
+                    reason="airspace_sim.world.benchmark not written yet")
+def test_bench_world_real_smoke(capsys, tmp_path):
+    proc = main_in_process(capsys, "bench-world", "--sizes", "4", "8", "--steps", "2",
+                           "--json", str(tmp_path / "b.json"))
+    assert proc.returncode == 0, proc.stderr
+    data = json.loads((tmp_path / "b.json").read_text())
+    assert [(r["aircraft"], r["trackers"]) for r in data["results"]] == [
+        (4, False), (8, False), (4, True), (8, True)]
+    assert all(r["steps_per_second"] > 0 for r in data["results"])
+    assert len(data["growth"]) == 2 and "growth exponent" in proc.stdout

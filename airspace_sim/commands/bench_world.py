@@ -35,7 +35,7 @@ def _positive_int(text: str) -> int:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sizes", type=_positive_int, nargs="+", default=[100, 1000], metavar="N",
                         help="numbers of aircraft (default: 100 1000)")
-    parser.add_argument("--steps", type=_positive_int, default=20, help="timed steps per size (default 20)")
+    parser.add_argument("--steps", type=_positive_int, default=10, help="timed steps per size, after 5 untimed warm-up steps (default 10)")
     parser.add_argument("--trackers", choices=("both", "on", "off"), default="both",
                         help="run with trackers, without, or both (default)")
     parser.add_argument("--json", metavar="PATH", help="also write the results as JSON")
@@ -44,7 +44,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def steps_per_second(result) -> float:
     """Steps per second from what ``bench_world`` returns (a number or a dict)."""
     if isinstance(result, dict):
-        for key in ("steps_per_second", "steps_per_s", "sps"):
+        for key in ("steps_per_s", "steps_per_second", "sps"):
             if key in result:
                 return float(result[key])
         for key in ("seconds_per_step", "s_per_step"):
@@ -69,17 +69,20 @@ def growth(rows: list[dict]) -> list[dict]:
 
 
 def format_report(rows: list[dict], grow: list[dict]) -> str:
-    lines = [f"{'aircraft':>8}  {'trackers':>8}  {'steps/s':>10}  {'ms/step':>9}  {'aircraft-steps/s':>16}"]
+    lines = [f"{'aircraft':>8}  {'trackers':>8}  {'steps/s':>10}  {'ms/step':>9}  "
+             f"{'aircraft-steps/s':>16}  {'tracks':>8}"]
     for r in rows:
         sps = r["steps_per_second"]
+        tracks = (r.get("raw") or {}).get("mean_tracks")
+        tracks = "-" if tracks is None else f"{tracks:.0f}"
         lines.append(f"{r['aircraft']:>8}  {('on' if r['trackers'] else 'off'):>8}  {sps:>10.1f}  "
-                     f"{1000.0 / sps:>9.2f}  {sps * r['aircraft']:>16.0f}")
+                     f"{1000.0 / sps:>9.2f}  {sps * r['aircraft']:>16.0f}  {tracks:>8}")
     if grow:
         lines.append("")
         for g in grow:
             lines.append(
                 f"trackers {'on' if g['trackers'] else 'off'}: {g['from']} → {g['to']} aircraft "
-                f"(×{g['to'] / g['from']:g}): time per step ×{g['time_ratio']:.2f}, "
+                f"(×{g['to'] / g['from']:.3g}): time per step ×{g['time_ratio']:.2f}, "
                 f"growth exponent {g['exponent']:.2f} (1 = linear, 2 = quadratic)"
             )
     return "\n".join(lines)
