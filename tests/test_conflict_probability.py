@@ -13,7 +13,7 @@ from airspace_sim.avoidance.heading import rotate
 R = 3000.0
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=150, deadline=None)
 @given(st.floats(-3.0, 3.0), st.floats(-3.0, 3.0), st.floats(-2.0, 4.5))
 def test_isotropic_matches_noncentral_chi_square(mx, my, log_sigma):
     # |X|²/σ² ~ χ'²(2, |m|²/σ²) for X ~ N(m, σ² I)
@@ -29,7 +29,7 @@ def test_centred_isotropic_closed_form():
     assert got == pytest.approx(1 - np.exp(-(R**2) / (2 * s**2)), abs=1e-10)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=120, deadline=None)
 @given(st.floats(-2.0, 2.0), st.floats(-2.0, 2.0), st.floats(-np.pi, np.pi), st.floats(0.0, 4.0))
 def test_rank_one_covariance_closed_form(mx, my, angle, log_sigma):
     # X = m + σ z u: inside iff σ² z² + 2σ (m·u) z + |m|² − R² < 0, an interval in z

@@ -77,7 +77,7 @@ def test_closed_form_matches_paper_magnitude_for_positive_gamma():
     assert theta == pytest.approx(-(beta - g), abs=1e-14)
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=150, deadline=None)
 @given(scene)
 def test_unclamped_rotation_makes_track_tangent(scene_):
     b, v, t_cpa = build(scene_)
@@ -90,7 +90,7 @@ def test_unclamped_rotation_makes_track_tangent(scene_):
     assert -np.dot(b, d) > 0
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=150, deadline=None)
 @given(scene)
 def test_rotation_moves_away_from_line_of_sight(scene_):
     b, v, _ = build(scene_)
@@ -104,7 +104,7 @@ def test_rotation_moves_away_from_line_of_sight(scene_):
         assert abs(theta) == pytest.approx(np.arcsin(R / np.linalg.norm(b)) - abs(g0), abs=1e-12)
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=150, deadline=None)
 @given(scene, st.floats(0.05, 1.0))
 def test_mirror_scene_negates_theta(scene_, max_angle):
     b, v, t_cpa = build(scene_)
@@ -116,7 +116,7 @@ def test_mirror_scene_negates_theta(scene_, max_angle):
     assert t2 == pytest.approx(-t1, abs=1e-12)
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=150, deadline=None)
 @given(scene, st.floats(-np.pi, np.pi), st.floats(0.05, 1.0))
 def test_rotating_whole_scene_keeps_theta(scene_, alpha, max_angle):
     b, v, t_cpa = build(scene_)
@@ -127,7 +127,7 @@ def test_rotating_whole_scene_keeps_theta(scene_, alpha, max_angle):
     assert t2 == pytest.approx(t1, abs=1e-9)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=120, deadline=None)
 @given(scene, st.floats(0.01, 0.5))
 def test_clamp(scene_, max_angle):
     b, v, t_cpa = build(scene_)
@@ -205,7 +205,7 @@ def test_inside_closing_and_opening():
     assert conflict and theta == 0.0
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=120, deadline=None)
 @given(
     st.lists(
         st.tuples(

@@ -33,7 +33,7 @@ position = st.tuples(st.floats(1.05, 8.0), st.floats(-np.pi, np.pi)).map(
 )
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=150, deadline=None)
 @given(vec, vec, position, st.sampled_from([-1.0, 1.0]))
 def test_roots_put_relative_track_on_tangent(vo, vi, b, side):
     assume(np.linalg.norm(vo) > 1.0)
@@ -77,7 +77,7 @@ def test_smallest_root_and_reachability_vs_brute_force(vo, vi, b):
     assert abs(abs(psi) - abs(best)) <= 2 * (grid[1] - grid[0])
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=150, deadline=None)
 @given(
     st.floats(20.0, 600.0), st.floats(-np.pi, np.pi), position, st.floats(-0.95, 0.95)
 )
@@ -124,7 +124,7 @@ def test_world_frame_differs_from_theta_for_moving_intruder():
     assert psi == pytest.approx(2 * theta, abs=1e-12)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=120, deadline=None)
 @given(vec, vec, position, st.floats(-np.pi, np.pi))
 def test_rotation_invariance(vo, vi, b, alpha):
     assume(np.linalg.norm(vo) > 1.0)
@@ -136,7 +136,7 @@ def test_rotation_invariance(vo, vi, b, alpha):
         assert wrap_angle(p2 - p1) == pytest.approx(0.0, abs=1e-8)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=120, deadline=None)
 @given(vec, vec, position, st.floats(1.0, 300.0))
 def test_range_at_time_roots(vo, vi, b, t):
     assume(np.linalg.norm(vo) > 1.0)
