@@ -40,7 +40,10 @@ def slow_choice(vo, r, v, valid, cands, radius, T):
             worst = min(worst, np.linalg.norm(r[j] + t * w) / radius)
         scored.append((psi, worst))
     clear = [(psi, w) for psi, w in scored if w >= 1 - CLEAR_TOLERANCE]
-    key = lambda pw: (abs(pw[0]), pw[0] > 0)  # noqa: E731
+
+    def key(pw):
+        return (abs(pw[0]), pw[0] > 0)
+
     if clear:
         best = min(clear, key=key)[0]
     else:
@@ -64,8 +67,9 @@ def test_vectorised_equals_brute_force_grid(seed):
     mx[0] = 0.0
     res = band_search(vo, r, v, valid, mx, R, 120.0, 0.1, RES, exact_candidates=False)
     for i in range(n):
-        psi, conflict, clear = slow_choice(vo[i], r[i], v[i], valid[i], grid_candidates(mx[i]),
-                                           R * 1.1, 120.0)
+        psi, conflict, clear = slow_choice(
+            vo[i], r[i], v[i], valid[i], grid_candidates(mx[i]), R * 1.1, 120.0
+        )
         assert res.heading_change[i] == psi
         assert res.conflict[i] == conflict
         got = set(res.candidates[i][res.band[i]].tolist())
@@ -83,7 +87,7 @@ def test_vectorised_equals_brute_force_with_exact_candidates(seed):
         cands = res.candidates[i][~np.isnan(res.candidates[i])]
         # the candidate set holds the grid and the limits
         assert set(grid_candidates(mx[i])) <= set(cands.tolist())
-        psi, conflict, clear = slow_choice(vo[i], r[i], v[i], valid[i], cands, R * 1.2, 90.0)
+        psi, conflict, _ = slow_choice(vo[i], r[i], v[i], valid[i], cands, R * 1.2, 90.0)
         assert res.heading_change[i] == psi
         assert res.conflict[i] == conflict
 
@@ -105,25 +109,57 @@ def test_single_intruder_reaches_exact_boundary(seed):
     vo, b, v_rel = single_intruder_scene(rng)
     T, margin = 2000.0, 0.1  # long look-ahead: the boundary is a tangent of the cone
     mx = np.pi / 2
-    res = band_search(vo[None], b[None, None], v_rel[None, None], np.ones((1, 1), bool),
-                      np.array([mx]), R, T, margin)
+    res = band_search(
+        vo[None],
+        b[None, None],
+        v_rel[None, None],
+        np.ones((1, 1), bool),
+        np.array([mx]),
+        R,
+        T,
+        margin,
+    )
     psi = res.heading_change[0]
     assert res.conflict[0]
     # the choice is one of heading.py's exact tangents with radius R·(1+margin) ...
-    tangents = [tangent_heading_change(vo, v_rel + vo, b, R * (1 + margin), side)[0]
-                for side in (-1.0, 1.0)]
-    ratio = cpa_min_ratio(vo[None], b[None, None], v_rel[None, None], np.ones((1, 1), bool),
-                          np.array([[psi]]), R * (1 + margin), T)[0, 0]
+    tangents = [
+        tangent_heading_change(vo, v_rel + vo, b, R * (1 + margin), side)[0] for side in (-1.0, 1.0)
+    ]
+    ratio = cpa_min_ratio(
+        vo[None],
+        b[None, None],
+        v_rel[None, None],
+        np.ones((1, 1), bool),
+        np.array([[psi]]),
+        R * (1 + margin),
+        T,
+    )[0, 0]
     if ratio >= 1 - CLEAR_TOLERANCE and abs(psi) < mx:
         assert min(abs(psi - t) for t in tangents if np.isfinite(t)) < 1e-12
         # ... and nothing closer to the current heading is clear (fine scan)
         scan = np.linspace(-abs(psi), abs(psi), 4001)[1:-1]
-        ratios = cpa_min_ratio(vo[None], b[None, None], v_rel[None, None],
-                               np.ones((1, 1), bool), scan[None], R * (1 + margin), T)[0]
+        ratios = cpa_min_ratio(
+            vo[None],
+            b[None, None],
+            v_rel[None, None],
+            np.ones((1, 1), bool),
+            scan[None],
+            R * (1 + margin),
+            T,
+        )[0]
         assert np.all(ratios < 1 - CLEAR_TOLERANCE)
     # the grid-only search lands within one grid step outside of the exact boundary
-    grid = band_search(vo[None], b[None, None], v_rel[None, None], np.ones((1, 1), bool),
-                       np.array([mx]), R, T, margin, exact_candidates=False)
+    grid = band_search(
+        vo[None],
+        b[None, None],
+        v_rel[None, None],
+        np.ones((1, 1), bool),
+        np.array([mx]),
+        R,
+        T,
+        margin,
+        exact_candidates=False,
+    )
     if grid.band[0].any() and abs(psi) < mx - RES:
         assert 0 <= abs(grid.heading_change[0]) - abs(psi) <= RES + 1e-12
 
@@ -138,8 +174,9 @@ def test_all_clear_no_turn():
     # no valid intruder at all, or no slot at all
     res = band_search(vo, r, v, np.zeros((2, 1), bool), np.full(2, np.pi / 4))
     assert np.array_equal(res.heading_change, [0.0, 0.0]) and not res.conflict.any()
-    res = band_search(vo, np.zeros((2, 0, 2)), np.zeros((2, 0, 2)), np.zeros((2, 0), bool),
-                      np.full(2, np.pi / 4))
+    res = band_search(
+        vo, np.zeros((2, 0, 2)), np.zeros((2, 0, 2)), np.zeros((2, 0), bool), np.full(2, np.pi / 4)
+    )
     assert np.array_equal(res.heading_change, [0.0, 0.0]) and not res.conflict.any()
     assert res.band[~np.isnan(res.candidates)].all()
 
@@ -148,8 +185,16 @@ def test_head_on_prefers_right_turn_exactly_on_tangent():
     vo = np.array([0.0, 250.0])
     vi = np.array([0.0, -250.0])
     b = np.array([0.0, 30000.0])
-    res = band_search(vo[None], b[None, None], (vi - vo)[None, None], np.ones((1, 1), bool),
-                      np.array([np.pi / 2]), R, 1000.0, 0.1)
+    res = band_search(
+        vo[None],
+        b[None, None],
+        (vi - vo)[None, None],
+        np.ones((1, 1), bool),
+        np.array([np.pi / 2]),
+        R,
+        1000.0,
+        0.1,
+    )
     psi = res.heading_change[0]
     assert psi < 0 and res.conflict[0]
     exact, ok = tangent_heading_change(vo, vi, b, R * 1.1, -1.0)
@@ -175,8 +220,16 @@ def test_two_symmetric_intruders_deterministic_right_turn():
     assert not tight.band.any()
     assert tight.heading_change[0] == 0.0
     # one intruder dead ahead: both limits are equally good, the right one is taken
-    head_on = band_search(vo, np.array([[[0.0, 15000.0]]]), np.array([[[0.0, -500.0]]]),
-                          np.ones((1, 1), bool), np.array([np.radians(2.0)]), R, 120.0, 0.1)
+    head_on = band_search(
+        vo,
+        np.array([[[0.0, 15000.0]]]),
+        np.array([[[0.0, -500.0]]]),
+        np.ones((1, 1), bool),
+        np.array([np.radians(2.0)]),
+        R,
+        120.0,
+        0.1,
+    )
     assert not head_on.band.any()
     assert head_on.heading_change[0] == -np.radians(2.0)
 
@@ -188,15 +241,21 @@ def test_rotation_of_whole_scene_is_invariant():
     mx = np.full(n, np.pi / 4)
     base = band_search(vo, r, v, valid, mx, R, 120.0, 0.1)
     for alpha in (0.3, -2.0, np.pi / 2):
-        rot = band_search(rotate(vo, alpha), rotate(r, alpha), rotate(v, alpha), valid, mx,
-                          R, 120.0, 0.1)
+        rot = band_search(
+            rotate(vo, alpha), rotate(r, alpha), rotate(v, alpha), valid, mx, R, 120.0, 0.1
+        )
         assert np.array_equal(rot.conflict, base.conflict)
         assert np.allclose(rot.heading_change, base.heading_change, atol=1e-9)
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.integers(0, 2**32 - 1), st.integers(1, 6), st.integers(0, 5),
-       st.floats(0.0, np.pi), st.floats(10.0, 300.0))
+@given(
+    st.integers(0, 2**32 - 1),
+    st.integers(1, 6),
+    st.integers(0, 5),
+    st.floats(0.0, np.pi),
+    st.floats(10.0, 300.0),
+)
 def test_never_exceeds_max_heading_change(seed, n, k, top, T):
     rng = np.random.default_rng(seed)
     vo, r, v, valid = random_scene(rng, n, k)
@@ -206,8 +265,10 @@ def test_never_exceeds_max_heading_change(seed, n, k, top, T):
     assert np.all(np.abs(res.heading_change) <= mx + 1e-15)
     assert np.all(np.isfinite(res.heading_change))
     used = ~np.isnan(res.candidates)
-    assert np.all(np.abs(res.candidates[used]) <= mx.repeat(used.shape[1]).reshape(used.shape)[used]
-                  * (1 + 1e-12) + 1e-15)
+    assert np.all(
+        np.abs(res.candidates[used])
+        <= mx.repeat(used.shape[1]).reshape(used.shape)[used] * (1 + 1e-12) + 1e-15
+    )
     assert not (res.band & ~used).any()
 
 
@@ -239,8 +300,9 @@ def test_resume():
     r = np.array([[[0.0, 90000.0]], [[30000.0, 30000.0 * np.tan(0.5)]], [[0.0, 90000.0]]])
     v = np.array([[[0.0, 0.0]], [[-250.0 * np.cos(0.5), -250.0 * np.sin(0.5)]], [[0.0, 0.0]]])
     v = v - vo[:, None, :]
-    psi, clear = resume_heading_change(vo, desired, r, v, np.ones((3, 1), bool),
-                                       np.array([1.0, 1.0, 0.2]))
+    psi, clear = resume_heading_change(
+        vo, desired, r, v, np.ones((3, 1), bool), np.array([1.0, 1.0, 0.2])
+    )
     assert clear[0] and psi[0] == pytest.approx(0.5)
     assert not clear[1] and psi[1] == 0.0  # the desired heading points at a head-on intruder
     assert clear[2] and psi[2] == pytest.approx(-0.2)  # limited

@@ -89,8 +89,14 @@ def test_tiny_covariance_far_outside_and_inside():
 
 
 @settings(max_examples=100, deadline=None)
-@given(st.floats(-2.0, 2.0), st.floats(-2.0, 2.0), st.floats(1.0, 3.5), st.floats(0.0, 3.5),
-       st.floats(-np.pi, np.pi), st.floats(-np.pi, np.pi))
+@given(
+    st.floats(-2.0, 2.0),
+    st.floats(-2.0, 2.0),
+    st.floats(1.0, 3.5),
+    st.floats(0.0, 3.5),
+    st.floats(-np.pi, np.pi),
+    st.floats(-np.pi, np.pi),
+)
 def test_rotation_invariance(mx, my, la, lb, phi, alpha):
     m = np.array([mx, my]) * R
     u = np.array([np.cos(phi), np.sin(phi)])
@@ -115,8 +121,11 @@ def test_mixture_aggregation_and_shapes():
     for i in range(n):
         for j in range(k):
             expect = sum(
-                mu[i, j, q] * max(probability_inside_circle(xs[i, j, q, s], ps[i, j, q, s], R)
-                                  for s in range(steps))
+                mu[i, j, q]
+                * max(
+                    probability_inside_circle(xs[i, j, q, s], ps[i, j, q, s], R)
+                    for s in range(steps)
+                )
                 for q in range(modes)
             )
             assert got[i, j] == pytest.approx(expect, abs=1e-12)
@@ -130,8 +139,13 @@ def test_mixture_aggregation_and_shapes():
 
 def test_mixture_limits():
     # deterministic predictions: the mode probability mass of the modes that enter the circle
-    xs = np.array([[[5000.0, 0.0], [2000.0, 0.0]], [[5000.0, 0.0], [4000.0, 0.0]],
-                   [[0.0, 5000.0], [0.0, 2500.0]]])  # (M=3, S=2, 2)
+    xs = np.array(
+        [
+            [[5000.0, 0.0], [2000.0, 0.0]],
+            [[5000.0, 0.0], [4000.0, 0.0]],
+            [[0.0, 5000.0], [0.0, 2500.0]],
+        ]
+    )  # (M=3, S=2, 2)
     ps = np.zeros((3, 2, 2, 2))
     mu = np.array([0.2, 0.5, 0.3])
     assert conflict_probability(xs, ps, mu, R) == pytest.approx(0.5)

@@ -209,10 +209,13 @@ def test_inside_closing_and_opening():
 @given(
     st.lists(
         st.tuples(
-            st.floats(-12000, 12000), st.floats(-12000, 12000),
-            st.floats(-800, 800), st.floats(-800, 800),
+            st.floats(-12000, 12000),
+            st.floats(-12000, 12000),
+            st.floats(-800, 800),
+            st.floats(-800, 800),
         ),
-        min_size=1, max_size=12,
+        min_size=1,
+        max_size=12,
     ),
     st.floats(0.1, 5.0),
     st.integers(1, 5),

@@ -78,9 +78,7 @@ def test_smallest_root_and_reachability_vs_brute_force(vo, vi, b):
 
 
 @settings(max_examples=150, deadline=None)
-@given(
-    st.floats(20.0, 600.0), st.floats(-np.pi, np.pi), position, st.floats(-0.95, 0.95)
-)
+@given(st.floats(20.0, 600.0), st.floats(-np.pi, np.pi), position, st.floats(-0.95, 0.95))
 def test_static_intruder_heading_change_equals_paper_theta(speed, heading, b, frac):
     # v_i = 0: v_rel = −v_o, and turning v_o by ψ turns v_rel by ψ, so ψ = θ (unclamped)
     beta = np.arcsin(R / np.linalg.norm(b))

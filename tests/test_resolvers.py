@@ -18,16 +18,20 @@ def make(name, **params):
 def scene():
     """Three ownships: head-on static intruder ahead, nothing near, two intruders."""
     vo = np.array([[0.0, 250.0], [250.0, 0.0], [0.0, 250.0]])
-    r = np.array([
-        [[0.0, 3300.0], [0.0, 0.0]],  # second slot unused
-        [[50000.0, 0.0], [0.0, 60000.0]],
-        [[500.0, 3400.0], [0.0, 3200.0]],
-    ])
-    vi = np.array([
-        [[0.0, 0.0], [0.0, 0.0]],
-        [[250.0, 0.0], [0.0, 250.0]],  # flying away
-        [[0.0, 0.0], [0.0, 0.0]],
-    ])
+    r = np.array(
+        [
+            [[0.0, 3300.0], [0.0, 0.0]],  # second slot unused
+            [[50000.0, 0.0], [0.0, 60000.0]],
+            [[500.0, 3400.0], [0.0, 3200.0]],
+        ]
+    )
+    vi = np.array(
+        [
+            [[0.0, 0.0], [0.0, 0.0]],
+            [[250.0, 0.0], [0.0, 250.0]],  # flying away
+            [[0.0, 0.0], [0.0, 0.0]],
+        ]
+    )
     valid = np.array([[True, False], [True, True], [True, True]])
     return vo, r, vi - vo[:, None, :], valid
 
@@ -75,14 +79,16 @@ def test_seed_governing_intruder_is_first_predicted_conflict():
     r = np.array([[[0.0, 3000.0 + 2.5 * 250.0 * 1.0], [1000.0, 3010.0]]])
     v = np.array([[[0.0, -250.0], [0.0, -250.0]]])
     valid = np.ones((1, 2), bool)
-    out = make("seed", dt=1.0, horizon=3, max_angle=np.pi).resolve(vo, r, v, valid,
-                                                                     np.array([np.pi]))
+    out = make("seed", dt=1.0, horizon=3, max_angle=np.pi).resolve(
+        vo, r, v, valid, np.array([np.pi])
+    )
     th, c = escape_angle(r[0], v[0], R, 1.0, 3, np.pi)
     assert c.all()
     assert out.heading_change[0] == th[1]
     # with the second slot invalid, the first governs
     out = make("seed", dt=1.0, horizon=3, max_angle=np.pi).resolve(
-        vo, r, v, np.array([[True, False]]), np.array([np.pi]))
+        vo, r, v, np.array([[True, False]]), np.array([np.pi])
+    )
     assert out.heading_change[0] == th[0]
 
 
@@ -111,8 +117,9 @@ def test_seed_world_uses_exact_heading_for_moving_intruder():
     vi = np.array([[[0.0, -250.0]]])
     r = np.array([[[0.0, 10000.0]]])
     v = vi - vo[:, None, :]
-    out = make("seed-world", dt=10.0, max_angle=np.pi).resolve(vo, r, v, np.ones((1, 1), bool),
-                                                               np.array([np.pi]))
+    out = make("seed-world", dt=10.0, max_angle=np.pi).resolve(
+        vo, r, v, np.ones((1, 1), bool), np.array([np.pi])
+    )
     exact, ok = tangent_heading_change(vo[0], vi[0, 0], r[0, 0], R)
     assert ok and out.heading_change[0] == pytest.approx(exact, abs=1e-12)
 

@@ -35,6 +35,8 @@ from airspace_sim.avoidance.heading import (
 
 #: Relative tolerance of the clear test ``d ≥ radius·(1 − CLEAR_TOLERANCE)``.
 CLEAR_TOLERANCE = 1e-9
+#: Default candidate grid step, rad (1°).
+DEFAULT_RESOLUTION = float(np.radians(1.0))
 
 
 @dataclass
@@ -146,7 +148,7 @@ def band_search(
     r_safe=3000.0,
     lookahead_s=120.0,
     margin=0.1,
-    resolution=np.radians(1.0),
+    resolution=DEFAULT_RESOLUTION,
     exact_candidates=True,
 ):
     """Choose each ownship's heading change against all its intruders at once.

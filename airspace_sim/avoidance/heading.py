@@ -165,9 +165,10 @@ def _smallest(roots):
     key = mag + 0.0
     best = np.argmin(key, axis=-1)
     other = 1 - best
-    tie = np.take_along_axis(key, other[..., None], -1)[..., 0] == np.take_along_axis(
-        key, best[..., None], -1
-    )[..., 0]
+    tie = (
+        np.take_along_axis(key, other[..., None], -1)[..., 0]
+        == np.take_along_axis(key, best[..., None], -1)[..., 0]
+    )
     r_best = np.take_along_axis(roots, best[..., None], -1)[..., 0]
     r_other = np.take_along_axis(roots, other[..., None], -1)[..., 0]
     return np.where(tie & (r_other < r_best), r_other, r_best)

@@ -45,8 +45,9 @@ def _panel_maps():
     s = 0.5 * (1.0 + _NODES)
     q = 0.25 * np.pi
     g = np.stack([s, 1 - np.cos(2 * q * s), np.sin(2 * q * s), 0.5 * (1 - np.cos(4 * q * s))])
-    dg = np.stack([np.full_like(s, 0.5), q * np.sin(2 * q * s), q * np.cos(2 * q * s),
-                   q * np.sin(4 * q * s)])
+    dg = np.stack(
+        [np.full_like(s, 0.5), q * np.sin(2 * q * s), q * np.cos(2 * q * s), q * np.sin(4 * q * s)]
+    )
     return g, dg
 
 

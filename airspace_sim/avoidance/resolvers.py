@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from airspace_sim.avoidance.bands import band_search
+from airspace_sim.avoidance.bands import DEFAULT_RESOLUTION, band_search
 from airspace_sim.avoidance.escape import escape_angle, predicted_conflict
 from airspace_sim.avoidance.heading import tangent_heading_change
 from airspace_sim.avoidance.probability import conflict_probability
@@ -77,12 +77,30 @@ class NoResolver:
     def __init__(self, r_safe=DEFAULT_R_SAFE, lookahead_s=120.0, margin=0.0):
         self.r_safe, self.lookahead_s, self.margin = float(r_safe), float(lookahead_s), margin
 
-    def resolve(self, own_velocity, rel_position, rel_velocity, valid, max_heading_change,
-                mode_predictions=None, rel_covariance=None):
-        vo, r, v, valid, mx = _arrays(own_velocity, rel_position, rel_velocity, valid,
-                                      max_heading_change)
-        res = band_search(vo, r, v, valid, np.zeros_like(mx), self.r_safe, self.lookahead_s,
-                          self.margin, exact_candidates=False)
+    def resolve(
+        self,
+        own_velocity,
+        rel_position,
+        rel_velocity,
+        valid,
+        max_heading_change,
+        mode_predictions=None,
+        rel_covariance=None,
+    ):
+        vo, r, v, valid, mx = _arrays(
+            own_velocity, rel_position, rel_velocity, valid, max_heading_change
+        )
+        res = band_search(
+            vo,
+            r,
+            v,
+            valid,
+            np.zeros_like(mx),
+            self.r_safe,
+            self.lookahead_s,
+            self.margin,
+            exact_candidates=False,
+        )
         return ResolverOutput(np.zeros(vo.shape[0]), res.conflict)
 
 
@@ -94,18 +112,29 @@ class SeedResolver:
     world-frame heading change instead of ``θ``).
     """
 
-    def __init__(self, r_safe=DEFAULT_R_SAFE, dt=0.1, horizon=3, max_angle=np.pi / 4,
-                 world_frame=False):
+    def __init__(
+        self, r_safe=DEFAULT_R_SAFE, dt=0.1, horizon=3, max_angle=np.pi / 4, world_frame=False
+    ):
         self.r_safe, self.dt, self.horizon = float(r_safe), float(dt), int(horizon)
         self.max_angle, self.world_frame = float(max_angle), bool(world_frame)
 
-    def resolve(self, own_velocity, rel_position, rel_velocity, valid, max_heading_change,
-                mode_predictions=None, rel_covariance=None):
-        vo, r, v, valid, mx = _arrays(own_velocity, rel_position, rel_velocity, valid,
-                                      max_heading_change)
+    def resolve(
+        self,
+        own_velocity,
+        rel_position,
+        rel_velocity,
+        valid,
+        max_heading_change,
+        mode_predictions=None,
+        rel_covariance=None,
+    ):
+        vo, r, v, valid, mx = _arrays(
+            own_velocity, rel_position, rel_velocity, valid, max_heading_change
+        )
         n, k = valid.shape
-        theta, pair_conflict = escape_angle(r, v, self.r_safe, self.dt, self.horizon,
-                                            self.max_angle)
+        theta, pair_conflict = escape_angle(
+            r, v, self.r_safe, self.dt, self.horizon, self.max_angle
+        )
         pair_conflict &= valid
         # governing intruder: earliest predicted conflict step, then nearest
         first = np.full((n, k), self.horizon + 1.0)
@@ -134,19 +163,44 @@ class BandsResolver:
     distance ``r_safe·(1+margin)``), ``resolution`` (rad, 1°), ``exact_candidates`` (True).
     """
 
-    def __init__(self, r_safe=DEFAULT_R_SAFE, lookahead_s=120.0, margin=0.1,
-                 resolution=np.radians(1.0), exact_candidates=True):
+    def __init__(
+        self,
+        r_safe=DEFAULT_R_SAFE,
+        lookahead_s=120.0,
+        margin=0.1,
+        resolution=DEFAULT_RESOLUTION,
+        exact_candidates=True,
+    ):
         self.r_safe, self.lookahead_s, self.margin = float(r_safe), float(lookahead_s), margin
         self.resolution, self.exact_candidates = float(resolution), bool(exact_candidates)
 
     def _search(self, vo, r, v, valid, mx, r_safe):
-        return band_search(vo, r, v, valid, mx, r_safe, self.lookahead_s, self.margin,
-                           self.resolution, self.exact_candidates)
+        return band_search(
+            vo,
+            r,
+            v,
+            valid,
+            mx,
+            r_safe,
+            self.lookahead_s,
+            self.margin,
+            self.resolution,
+            self.exact_candidates,
+        )
 
-    def resolve(self, own_velocity, rel_position, rel_velocity, valid, max_heading_change,
-                mode_predictions=None, rel_covariance=None):
-        vo, r, v, valid, mx = _arrays(own_velocity, rel_position, rel_velocity, valid,
-                                      max_heading_change)
+    def resolve(
+        self,
+        own_velocity,
+        rel_position,
+        rel_velocity,
+        valid,
+        max_heading_change,
+        mode_predictions=None,
+        rel_covariance=None,
+    ):
+        vo, r, v, valid, mx = _arrays(
+            own_velocity, rel_position, rel_velocity, valid, max_heading_change
+        )
         res = self._search(vo, r, v, valid, mx, self.r_safe)
         return ResolverOutput(res.heading_change, res.conflict, res.candidates, res.band)
 
@@ -165,19 +219,30 @@ class ProbabilisticBandsResolver(BandsResolver):
         super().__init__(**params)
         self.threshold = float(threshold)
 
-    def resolve(self, own_velocity, rel_position, rel_velocity, valid, max_heading_change,
-                mode_predictions=None, rel_covariance=None):
+    def resolve(
+        self,
+        own_velocity,
+        rel_position,
+        rel_velocity,
+        valid,
+        max_heading_change,
+        mode_predictions=None,
+        rel_covariance=None,
+    ):
         if mode_predictions is None:
-            return super().resolve(own_velocity, rel_position, rel_velocity, valid,
-                                   max_heading_change)
-        vo, r, v, valid, mx = _arrays(own_velocity, rel_position, rel_velocity, valid,
-                                      max_heading_change)
+            return super().resolve(
+                own_velocity, rel_position, rel_velocity, valid, max_heading_change
+            )
+        vo, r, v, valid, mx = _arrays(
+            own_velocity, rel_position, rel_velocity, valid, max_heading_change
+        )
         xs, ps, mu = mode_predictions
         prob = np.where(valid, conflict_probability(xs, ps, mu, self.r_safe), 0.0)
         threat = valid & (prob >= self.threshold)
         res = self._search(vo, r, v, threat, mx, self.r_safe)
-        return ResolverOutput(res.heading_change, threat.any(axis=-1), res.candidates, res.band,
-                              prob)
+        return ResolverOutput(
+            res.heading_change, threat.any(axis=-1), res.candidates, res.band, prob
+        )
 
 
 register("resolver", "none")(NoResolver)
