@@ -1,8 +1,7 @@
 """Numba kernels of the batched IMM (paper §IV). Internal: use :class:`airspace_sim.tracking.IMM`.
 
-:func:`imm_step_kernel` returns the kernel for one model size (``M`` modes, ``n`` states,
-``m`` measurement components), compiled with those sizes as constants so that every small
-loop has a fixed trip count. The kernel processes the batch in chunks of ``W`` trackers:
+:func:`imm_step_kernel` returns the step kernel (``M`` modes, ``n`` states, ``m``
+measurement components, ``B`` trackers). It processes the batch in chunks of ``W`` trackers:
 it gathers a chunk into structure-of-arrays work buffers (tracker index last), runs each
 step of the IMM cycle as loops whose innermost loop runs over the ``W`` trackers of the
 chunk — which LLVM turns into SIMD code, each lane one tracker — and scatters the results
@@ -97,9 +96,12 @@ def _inv_logdet(S, Si, logdet, L, Li, want_log):
                     Si[j, i, w] = s
 
 
-def _make_imm_step(M, n, m, W):
-    """Compile the IMM step for fixed (M, n, m) and chunk width W (closure variables are
-    compile-time constants for numba, so the small loops have constant trip counts)."""
+def _make_imm_step(Mc, nc, mc, W):
+    """The IMM step for chunk width W and, unless 0, fixed sizes M = Mc, n = nc, m = mc.
+
+    Closure variables are compile-time constants for numba: with W fixed the innermost
+    loops (over the W trackers of a chunk) have a constant trip count and vectorise
+    without remainder loops."""
 
     @njit(cache=True, error_model="numpy")
     def imm_step(
@@ -119,6 +121,9 @@ def _make_imm_step(M, n, m, W):
         P_o (B, n, n), nis_o (B,), ll_o (B, M), gated_o (B,) bool.
         """
         B = xm.shape[0]
+        M = xm.shape[1] if Mc == 0 else Mc
+        n = xm.shape[2] if nc == 0 else nc
+        m = z.shape[1] if mc == 0 else mc
         nH = Hr.shape[0]
         half_m_log2pi = 0.5 * m * _LOG_2PI
 
@@ -461,8 +466,14 @@ def _make_imm_step(M, n, m, W):
 _STEP_KERNELS: dict = {}
 
 
-def imm_step_kernel(M: int, n: int, m: int, chunk: int = CHUNK):
-    """The IMM step kernel compiled for ``M`` modes, ``n`` states, ``m`` measurements."""
+def imm_step_kernel(M: int = 0, n: int = 0, m: int = 0, chunk: int = CHUNK):
+    """The IMM step kernel.
+
+    By default (``M = n = m = 0``) one kernel serves every model size, with the sizes read
+    from the arrays at run time and only the chunk width fixed, so numba compiles it once.
+    Fixing the sizes too makes a kernel with constant trip counts everywhere; it gives the
+    same bits, about 10 % faster, at the price of another (long) compilation per size.
+    """
     key = (int(M), int(n), int(m), int(chunk))
     if key not in _STEP_KERNELS:
         _STEP_KERNELS[key] = _make_imm_step(*key)

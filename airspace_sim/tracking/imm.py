@@ -202,7 +202,7 @@ class IMM:
         #: chi-square threshold on d² (inf = no gating)
         self.gate_threshold = gate_d2
         self.M, self.n, self.m = M, n, m
-        self._kernel = _kernels.imm_step_kernel(M, n, m)
+        self._kernel = _kernels.imm_step_kernel()
 
         x0, P0, mu0 = self._initial(x0, P0, mu0, "")
         B = x0.shape[0]
