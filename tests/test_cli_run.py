@@ -289,3 +289,35 @@ def test_bench_world_real_smoke(capsys, tmp_path):
         (4, False), (8, False), (4, True), (8, True)]
     assert all(r["steps_per_second"] > 0 for r in data["results"])
     assert len(data["growth"]) == 2 and "growth exponent" in proc.stdout
+
+
+@needs_world
+def test_periodic_checkpoint_resumes_the_rest_of_the_run(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    from airspace_sim.commands.run import load_checkpoint, save_checkpoint
+
+    ckpt = tmp_path / "run.pkl"
+    saved = []
+
+    def spy(path, world, scenario, meta):  # Ctrl-C right after the first periodic save
+        how = save_checkpoint(path, world, scenario, meta)
+        saved.append((world.step_count, dict(meta)))
+        if len(saved) == 1:
+            raise KeyboardInterrupt
+        return how
+
+    monkeypatch.setattr(run_cmd, "save_checkpoint", spy)
+    proc = main_in_process(capsys, "run", "head_on", "--steps", "9", "--checkpoint", str(ckpt),
+                           "--checkpoint-every", "4", "--quiet")
+    assert proc.returncode == 130 and "interrupted" in proc.stderr
+    meta = {"scenario": "head_on", "source": saved[0][1]["source"], "seed": 0, "overrides": [],
+            "total_steps": 9}
+    assert saved == [(4, meta), (4, meta)]  # the periodic save, then the one on Ctrl-C
+    monkeypatch.undo()
+    monkeypatch.chdir(tmp_path)
+    world, meta = load_checkpoint(ckpt)
+    assert world.step_count == 4
+    rest = _run_json(capsys, tmp_path / "rest.json", "--resume", str(ckpt))  # the remaining 5
+    whole = _run_json(capsys, tmp_path / "whole.json", "head_on", "--steps", "9")
+    assert rest["steps"] == 5 and rest["total_steps"] == 9
+    assert rest["metrics"] == whole["metrics"]

@@ -9,6 +9,8 @@ Examples::
     airspace-sim run dense_random --json out/dense.json --seed 3
     airspace-sim run ring --checkpoint out/ring.pkl --steps 100   # run 100 steps, save
     airspace-sim run ring --resume out/ring.pkl --steps 100       # 100 more from there
+    airspace-sim run ring --checkpoint out/ring.pkl --checkpoint-every 50   # survives a kill
+    airspace-sim run --resume out/ring.pkl                        # the rest of the planned run
 
 The scenario is a name from the repository's ``scenarios/`` folder or a path to a TOML
 file. ``--set key=value`` changes any scenario key (dotted, e.g. ``sensor.sigma=30``,
@@ -79,6 +81,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fps", type=float, default=10.0, help="frames per second of the GIF/MP4 (default 10)")
     parser.add_argument("--json", metavar="PATH", help="write the summary as JSON to PATH")
     parser.add_argument("--checkpoint", metavar="PATH", help="save the world to PATH at the end (and on Ctrl-C) to resume later")
+    parser.add_argument("--checkpoint-every", type=_positive_int, metavar="N",
+                        help="also save the checkpoint every N steps (survives a killed run)")
     parser.add_argument("--resume", metavar="PATH", help="continue a run saved with --checkpoint (the scenario argument is optional)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar and no table")
 
@@ -339,6 +343,14 @@ def run(args) -> int:
 
     from tqdm import tqdm
 
+    if args.checkpoint_every and not args.checkpoint:
+        raise UserError("--checkpoint-every needs --checkpoint PATH")
+    planned_total = world.step_count + steps
+
+    def checkpoint_meta() -> dict:
+        return {"scenario": name, "source": source, "seed": seed, "overrides": overrides,
+                "total_steps": planned_total}
+
     start_step = world.step_count
     interrupted = False
     t0 = time.perf_counter()
@@ -351,6 +363,8 @@ def run(args) -> int:
             if frames is not None and ((k + 1) % args.every == 0 or k + 1 == steps or everybody_left):
                 frames.add(world.snapshot())
             bar.update(1)
+            if args.checkpoint_every and (k + 1) % args.checkpoint_every == 0 and k + 1 < steps:
+                save_checkpoint(Path(args.checkpoint), world, sc, checkpoint_meta())
             if everybody_left:
                 break
     except KeyboardInterrupt:
@@ -384,8 +398,9 @@ def run(args) -> int:
     if args.json:
         _write_json(Path(args.json), summary)
     if args.checkpoint:
-        meta = {"scenario": name, "source": source, "seed": seed, "overrides": overrides,
-                "total_steps": world.step_count + (steps - done if interrupted else 0)}
+        meta = checkpoint_meta()
+        if not interrupted:  # finished (or everybody left): resuming needs --steps
+            meta["total_steps"] = world.step_count
         summary["checkpoint"] = save_checkpoint(Path(args.checkpoint), world, sc, meta)
     if not args.quiet:
         print(format_table(summary))
