@@ -71,6 +71,8 @@ class ConstantVelocityTracker(KalmanFilter):
 
 
 @register("tracker", "kalman")
-def kalman_tracker(preset, sigma: float, sigma_accel: float | None = None) -> ConstantVelocityTracker:
+def kalman_tracker(
+    preset, sigma: float, sigma_accel: float | None = None
+) -> ConstantVelocityTracker:
     """The ``"kalman"`` tracker: :class:`ConstantVelocityTracker` with R = σ² I."""
     return ConstantVelocityTracker(preset, sigma, sigma_accel)

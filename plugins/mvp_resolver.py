@@ -32,8 +32,13 @@ class MVPResolver:
     ``min_time`` (s, floor of the CPA time in the push, avoids dividing by ~0; default 1 s).
     """
 
-    def __init__(self, r_safe: float = 3000.0, lookahead_s: float = 120.0, margin: float = 0.1,
-                 min_time: float = 1.0):
+    def __init__(
+        self,
+        r_safe: float = 3000.0,
+        lookahead_s: float = 120.0,
+        margin: float = 0.1,
+        min_time: float = 1.0,
+    ):
         self.r_safe, self.lookahead_s = float(r_safe), float(lookahead_s)
         self.margin, self.min_time = float(margin), float(min_time)
 
@@ -50,13 +55,23 @@ class MVPResolver:
         dist_now = np.hypot(r[..., 0], r[..., 1])
         r_clear = self.r_safe * (1.0 + self.margin)
         closing = t > 0
-        conflict = valid & closing & (
-            ((t < self.lookahead_s) & (dist_cpa < r_clear)) | (dist_now < self.r_safe)
+        conflict = (
+            valid
+            & closing
+            & (((t < self.lookahead_s) & (dist_cpa < r_clear)) | (dist_now < self.r_safe))
         )
         return t, d, conflict
 
-    def resolve(self, own_velocity, rel_position, rel_velocity, valid, max_heading_change,
-                mode_predictions=None, rel_covariance=None):
+    def resolve(
+        self,
+        own_velocity,
+        rel_position,
+        rel_velocity,
+        valid,
+        max_heading_change,
+        mode_predictions=None,
+        rel_covariance=None,
+    ):
         vo = np.asarray(own_velocity, dtype=float).reshape(-1, 2)
         n = vo.shape[0]
         r = np.asarray(rel_position, dtype=float).reshape(n, -1, 2)

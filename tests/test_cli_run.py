@@ -31,7 +31,11 @@ def cli(*args, cwd=None, env=None, timeout=120):
     full_env = {**os.environ, "AIRSPACE_SIM_PLUGINS": "", **(env or {})}
     return subprocess.run(
         [sys.executable, "-m", "airspace_sim", *args],
-        cwd=cwd or REPO, env=full_env, capture_output=True, text=True, timeout=timeout,
+        cwd=cwd or REPO,
+        env=full_env,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
     )
 
 
@@ -69,8 +73,12 @@ def test_unknown_scenario(tmp_path):
 
 
 def test_bad_set_subprocess(tmp_path):
-    assert_one_line_error(cli("run", "head_on", "--set", "traffic.count=abc", cwd=tmp_path),
-                          "--set traffic.count:", "non-negative integer", "'abc'")
+    assert_one_line_error(
+        cli("run", "head_on", "--set", "traffic.count=abc", cwd=tmp_path),
+        "--set traffic.count:",
+        "non-negative integer",
+        "'abc'",
+    )
 
 
 @pytest.mark.parametrize(
@@ -86,14 +94,21 @@ def test_bad_set_subprocess(tmp_path):
 )
 def test_bad_set(tmp_path, monkeypatch, capsys, override, needles):
     monkeypatch.chdir(tmp_path)
-    assert_one_line_error(main_in_process(capsys, "run", "head_on", "--steps", "1", "--set", override), *needles)
+    assert_one_line_error(
+        main_in_process(capsys, "run", "head_on", "--steps", "1", "--set", override), *needles
+    )
 
 
 BAD_FILES = {
-    "unknown_key.toml": ('name = "x"\n[sensor]\nsigam = 3.0\n', ["sensor.sigam", "unknown key", "3"]),
+    "unknown_key.toml": (
+        'name = "x"\n[sensor]\nsigam = 3.0\n',
+        ["sensor.sigam", "unknown key", "3"],
+    ),
     "wrong_type.toml": ('name = "x"\n[traffic]\ncount = "many"\n', ["traffic.count", "'many'"]),
-    "out_of_range.toml": ('name = "x"\n[traffic]\ncount = -3\n',
-                          ["traffic.count: expected a non-negative integer, got -3"]),
+    "out_of_range.toml": (
+        'name = "x"\n[traffic]\ncount = -3\n',
+        ["traffic.count: expected a non-negative integer, got -3"],
+    ),
     "malformed.toml": ('name = "x"\n[traffic\ncount = 3\n', ["invalid TOML at line 2, column"]),
 }
 
@@ -115,7 +130,9 @@ def test_bad_scenario_file(tmp_path, monkeypatch, capsys, filename):
 
 
 def test_missing_file(tmp_path):
-    assert_one_line_error(cli("run", "missing.toml", cwd=tmp_path), "missing.toml", "no such scenario file")
+    assert_one_line_error(
+        cli("run", "missing.toml", cwd=tmp_path), "missing.toml", "no such scenario file"
+    )
 
 
 def test_gif_needs_render(tmp_path):
@@ -123,7 +140,9 @@ def test_gif_needs_render(tmp_path):
 
 
 @needs_world
-@pytest.mark.skipif(importlib.util.find_spec("imageio_ffmpeg") is not None, reason="ffmpeg is installed")
+@pytest.mark.skipif(
+    importlib.util.find_spec("imageio_ffmpeg") is not None, reason="ffmpeg is installed"
+)
 def test_mp4_without_ffmpeg_is_one_line(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     proc = main_in_process(capsys, "run", "head_on", "--steps", "1", "--render", "out", "--mp4")
@@ -141,20 +160,39 @@ def test_list(tmp_path):
 
 
 def test_jsonable_and_table():
-    metrics = {"los": np.int64(3), "min_sep": np.float64(1234.5678), "nan": float("nan"),
-               "per": {"a": np.array([1.0, 2.0])}, "flag": np.bool_(True)}
+    metrics = {
+        "los": np.int64(3),
+        "min_sep": np.float64(1234.5678),
+        "nan": float("nan"),
+        "per": {"a": np.array([1.0, 2.0])},
+        "flag": np.bool_(True),
+    }
     out = run_cmd.jsonable(metrics)
-    assert out == {"los": 3, "min_sep": 1234.5678, "nan": None, "per": {"a": [1.0, 2.0]}, "flag": True}
+    assert out == {
+        "los": 3,
+        "min_sep": 1234.5678,
+        "nan": None,
+        "per": {"a": [1.0, 2.0]},
+        "flag": True,
+    }
     json.dumps(out, allow_nan=False)
-    table = run_cmd.format_table({"scenario": "x", "seed": 1, "steps": 5, "simulated_time": 5.0,
-                                  "wall_time": 0.1, "steps_per_second": 50.0, "metrics": out})
+    table = run_cmd.format_table(
+        {
+            "scenario": "x",
+            "seed": 1,
+            "steps": 5,
+            "simulated_time": 5.0,
+            "wall_time": 0.1,
+            "steps_per_second": 50.0,
+            "metrics": out,
+        }
+    )
     lines = table.splitlines()
     assert any(line.split() == ["per.a", "[1,", "2]"] for line in lines), table
     assert any(line.split() == ["min_sep", "1235"] for line in lines), table
 
 
 # --------------------------------------------------------------------------- real runs
-
 
 
 def _summary_without_timing(path):
@@ -169,8 +207,22 @@ def _summary_without_timing(path):
 def test_run_renders_frames_gif_and_summary(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     out = tmp_path / "frames"
-    proc = main_in_process(capsys, "run", "demo", "--steps", "6", "--every", "2", "--render", str(out),
-                           "--gif", "--size", "200x160", "--json", str(tmp_path / "s.json"))
+    proc = main_in_process(
+        capsys,
+        "run",
+        "demo",
+        "--steps",
+        "6",
+        "--every",
+        "2",
+        "--render",
+        str(out),
+        "--gif",
+        "--size",
+        "200x160",
+        "--json",
+        str(tmp_path / "s.json"),
+    )
     assert proc.returncode == 0, proc.stderr
     import imageio.v3 as iio
 
@@ -215,7 +267,9 @@ def test_run_is_reproducible_and_seed_matters(tmp_path, monkeypatch, capsys):
 def test_run_stops_when_everybody_left(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     # the head-on pair reaches its last waypoints (60 km away at 230 m/s) after ~261 s
-    s = _run_json(capsys, tmp_path / "s.json", "head_on", "--steps", "1000", "--set", "resolver.kind=none")
+    s = _run_json(
+        capsys, tmp_path / "s.json", "head_on", "--steps", "1000", "--set", "resolver.kind=none"
+    )
     assert s["all_left"] and s["steps"] < 1000
 
 
@@ -225,8 +279,16 @@ def test_checkpoint_resume_matches_uninterrupted_run(tmp_path, monkeypatch, caps
     ckpt = tmp_path / "run.pkl"
     common = ["--set", "traffic.count=8"]
     whole = _run_json(capsys, tmp_path / "whole.json", "dense_random", "--steps", "8", *common)
-    first = _run_json(capsys, tmp_path / "first.json", "dense_random", "--steps", "3", *common,
-                      "--checkpoint", str(ckpt))
+    first = _run_json(
+        capsys,
+        tmp_path / "first.json",
+        "dense_random",
+        "--steps",
+        "3",
+        *common,
+        "--checkpoint",
+        str(ckpt),
+    )
     assert first["steps"] == 3 and ckpt.is_file()
     second = _run_json(capsys, tmp_path / "second.json", "--resume", str(ckpt), "--steps", "5")
     assert second["total_steps"] == 8 and second["steps"] == 5
@@ -237,9 +299,15 @@ def test_checkpoint_resume_matches_uninterrupted_run(tmp_path, monkeypatch, caps
 
 def test_resume_errors(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
-    assert_one_line_error(main_in_process(capsys, "run", "--resume", "nope.pkl"), "nope.pkl", "no such file")
+    assert_one_line_error(
+        main_in_process(capsys, "run", "--resume", "nope.pkl"), "nope.pkl", "no such file"
+    )
     (tmp_path / "junk.pkl").write_bytes(b"not a pickle")
-    assert_one_line_error(main_in_process(capsys, "run", "--resume", "junk.pkl"), "junk.pkl", "not a readable checkpoint")
+    assert_one_line_error(
+        main_in_process(capsys, "run", "--resume", "junk.pkl"),
+        "junk.pkl",
+        "not a readable checkpoint",
+    )
 
 
 # --------------------------------------------------------------------------- bench-world
@@ -253,16 +321,27 @@ def test_bench_world_report_with_a_fake_benchmark(monkeypatch, capsys, tmp_path)
     def fake_bench_world(n_aircraft, steps, trackers):
         calls.append((n_aircraft, steps, trackers))
         # time per step ∝ N (without trackers) or N^1.5 (with)
-        cost = 1e-5 * n_aircraft * (n_aircraft ** 0.5 if trackers else 1.0)
+        cost = 1e-5 * n_aircraft * (n_aircraft**0.5 if trackers else 1.0)
         return {"steps_per_second": 1.0 / cost, "setup_s": 0.1}
 
-    monkeypatch.setitem(sys.modules, "airspace_sim.world.benchmark",
-                        types.SimpleNamespace(bench_world=fake_bench_world))
-    proc = main_in_process(capsys, "bench-world", "--steps", "7", "--json", str(tmp_path / "b.json"))
+    monkeypatch.setitem(
+        sys.modules,
+        "airspace_sim.world.benchmark",
+        types.SimpleNamespace(bench_world=fake_bench_world),
+    )
+    proc = main_in_process(
+        capsys, "bench-world", "--steps", "7", "--json", str(tmp_path / "b.json")
+    )
     assert proc.returncode == 0, proc.stderr
     assert calls == [(100, 7, False), (1000, 7, False), (100, 7, True), (1000, 7, True)]
-    assert "trackers off: 100 → 1000 aircraft (×10): time per step ×10.00, growth exponent 1.00" in proc.stdout
-    assert "trackers on: 100 → 1000 aircraft (×10): time per step ×31.62, growth exponent 1.50" in proc.stdout
+    assert (
+        "trackers off: 100 → 1000 aircraft (×10): time per step ×10.00, growth exponent 1.00"
+        in proc.stdout
+    )
+    assert (
+        "trackers on: 100 → 1000 aircraft (×10): time per step ×31.62, growth exponent 1.50"
+        in proc.stdout
+    )
     data = json.loads((tmp_path / "b.json").read_text())
     assert [r["aircraft"] for r in data["results"]] == [100, 1000, 100, 1000]
     assert data["growth"][0]["exponent"] == pytest.approx(1.0)
@@ -271,22 +350,40 @@ def test_bench_world_report_with_a_fake_benchmark(monkeypatch, capsys, tmp_path)
 def test_bench_world_accepts_a_number(monkeypatch, capsys):
     import types
 
-    monkeypatch.setitem(sys.modules, "airspace_sim.world.benchmark",
-                        types.SimpleNamespace(bench_world=lambda n, steps, trackers: 5000.0 / n))
+    monkeypatch.setitem(
+        sys.modules,
+        "airspace_sim.world.benchmark",
+        types.SimpleNamespace(bench_world=lambda n, steps, trackers: 5000.0 / n),
+    )
     proc = main_in_process(capsys, "bench-world", "--sizes", "10", "20", "--trackers", "off")
     assert proc.returncode == 0, proc.stderr
     assert "time per step ×2.00, growth exponent 1.00" in proc.stdout
 
 
-@pytest.mark.skipif(importlib.util.find_spec("airspace_sim.world.benchmark") is None,
-                    reason="airspace_sim.world.benchmark not written yet")
+@pytest.mark.skipif(
+    importlib.util.find_spec("airspace_sim.world.benchmark") is None,
+    reason="airspace_sim.world.benchmark not written yet",
+)
 def test_bench_world_real_smoke(capsys, tmp_path):
-    proc = main_in_process(capsys, "bench-world", "--sizes", "4", "8", "--steps", "2",
-                           "--json", str(tmp_path / "b.json"))
+    proc = main_in_process(
+        capsys,
+        "bench-world",
+        "--sizes",
+        "4",
+        "8",
+        "--steps",
+        "2",
+        "--json",
+        str(tmp_path / "b.json"),
+    )
     assert proc.returncode == 0, proc.stderr
     data = json.loads((tmp_path / "b.json").read_text())
     assert [(r["aircraft"], r["trackers"]) for r in data["results"]] == [
-        (4, False), (8, False), (4, True), (8, True)]
+        (4, False),
+        (8, False),
+        (4, True),
+        (8, True),
+    ]
     assert all(r["steps_per_second"] > 0 for r in data["results"])
     assert len(data["growth"]) == 2 and "growth exponent" in proc.stdout
 
@@ -307,11 +404,26 @@ def test_periodic_checkpoint_resumes_the_rest_of_the_run(tmp_path, monkeypatch, 
         return how
 
     monkeypatch.setattr(run_cmd, "save_checkpoint", spy)
-    proc = main_in_process(capsys, "run", "head_on", "--steps", "9", "--checkpoint", str(ckpt),
-                           "--checkpoint-every", "4", "--quiet")
+    proc = main_in_process(
+        capsys,
+        "run",
+        "head_on",
+        "--steps",
+        "9",
+        "--checkpoint",
+        str(ckpt),
+        "--checkpoint-every",
+        "4",
+        "--quiet",
+    )
     assert proc.returncode == 130 and "interrupted" in proc.stderr
-    meta = {"scenario": "head_on", "source": saved[0][1]["source"], "seed": 0, "overrides": [],
-            "total_steps": 9}
+    meta = {
+        "scenario": "head_on",
+        "source": saved[0][1]["source"],
+        "seed": 0,
+        "overrides": [],
+        "total_steps": 9,
+    }
     assert saved == [(4, meta), (4, meta)]  # the periodic save, then the one on Ctrl-C
     monkeypatch.undo()
     monkeypatch.chdir(tmp_path)

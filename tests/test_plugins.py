@@ -77,7 +77,9 @@ def test_found_via_environment_folder(clean_registry, tmp_path, monkeypatch):
     folder = tmp_path / "mine"
     folder.mkdir()
     shutil.copy(PLUGIN, folder)
-    monkeypatch.setenv("AIRSPACE_SIM_PLUGINS", os.pathsep.join([str(tmp_path / "absent"), str(folder)]))
+    monkeypatch.setenv(
+        "AIRSPACE_SIM_PLUGINS", os.pathsep.join([str(tmp_path / "absent"), str(folder)])
+    )
     _check_kalman_factory()
 
 
@@ -87,8 +89,12 @@ def _install_distribution(site: Path, module_name: str, source: str, entry: str 
     (site / f"{module_name}.py").write_text(source)
     info = site / "airspace_sim_test_plugin-0.1.dist-info"
     info.mkdir()
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: airspace-sim-test-plugin\nVersion: 0.1\n")
-    (info / "entry_points.txt").write_text(f"[airspace_sim.plugins]\nkalman = {entry or module_name}\n")
+    (info / "METADATA").write_text(
+        "Metadata-Version: 2.1\nName: airspace-sim-test-plugin\nVersion: 0.1\n"
+    )
+    (info / "entry_points.txt").write_text(
+        f"[airspace_sim.plugins]\nkalman = {entry or module_name}\n"
+    )
 
 
 def test_found_via_entry_point(clean_registry, tmp_path, monkeypatch):
@@ -110,7 +116,7 @@ def test_plugin_file_that_raises_names_the_file(clean_registry):
     msg = str(info.value)
     assert "\n" not in msg
     assert str(bad) in msg and "RuntimeError: boom second line" in msg
-    assert "broken" not in {k[len(PREFIX):] for k in sys.modules if k.startswith(PREFIX)}
+    assert "broken" not in {k[len(PREFIX) :] for k in sys.modules if k.startswith(PREFIX)}
 
 
 def test_plugin_file_with_syntax_error(clean_registry):
@@ -127,19 +133,29 @@ def test_entry_point_that_raises_is_a_user_error(clean_registry, tmp_path, monke
     with pytest.raises(UserError) as info:
         registry.load_plugins()
     msg = str(info.value)
-    assert "entry point kalman = airspace_sim_kalman_ep" in msg and "ImportError: missing dep" in msg
+    assert (
+        "entry point kalman = airspace_sim_kalman_ep" in msg and "ImportError: missing dep" in msg
+    )
 
 
 def test_cli_reports_broken_plugin_in_one_line(tmp_path):
     (tmp_path / "plugins").mkdir()
     (tmp_path / "plugins" / "broken.py").write_text("1 / 0\n")
     env = {**os.environ, "AIRSPACE_SIM_PLUGINS": ""}
-    proc = subprocess.run([sys.executable, "-m", "airspace_sim", "run", "head_on", "--steps", "1"],
-                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "-m", "airspace_sim", "run", "head_on", "--steps", "1"],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr
     lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and "broken.py" in lines[0] and "ZeroDivisionError" in lines[0], proc.stderr
+    assert len(lines) == 1 and "broken.py" in lines[0] and "ZeroDivisionError" in lines[0], (
+        proc.stderr
+    )
 
 
 # --------------------------------------------------------------------------- the Kalman tracker
@@ -214,7 +230,9 @@ def test_kalman_tracker_remove_by_mask_and_indices():
 def test_kalman_noise_follows_the_preset():
     mod = _load_plugin_module()
     real, seed = presets.get("realistic"), presets.get("seed")
-    assert mod.manoeuvre_sigma(real) == pytest.approx(0.5 * np.radians(3.0) * np.mean(real.speed_range))
+    assert mod.manoeuvre_sigma(real) == pytest.approx(
+        0.5 * np.radians(3.0) * np.mean(real.speed_range)
+    )
     f1 = mod.kalman_tracker(real, 50.0)
     f2 = mod.kalman_tracker(real, 50.0, sigma_accel=0.0)
     assert f1.Q[1, 1] > f2.Q[1, 1] > 0
@@ -253,7 +271,9 @@ def test_kalman_tracker_in_a_world(clean_registry):
 
 
 def _load_mvp():
-    spec = importlib.util.spec_from_file_location("mvp_resolver_under_test", REPO / "plugins" / "mvp_resolver.py")
+    spec = importlib.util.spec_from_file_location(
+        "mvp_resolver_under_test", REPO / "plugins" / "mvp_resolver.py"
+    )
     module = importlib.util.module_from_spec(spec)
     saved = {kind: dict(parts) for kind, parts in registry._REGISTRY.items()}
     try:
@@ -300,7 +320,9 @@ def test_mvp_no_conflict_no_turn():
     mvp = _load_mvp().MVPResolver(r_safe=3000.0, lookahead_s=120.0)
     own_v = np.array([[230.0, 0.0], [230.0, 0.0], [230.0, 0.0]])
     rel_p = np.array([[[20000.0, 10000.0]], [[-5000.0, 0.0]], [[20000.0, 0.0]]])
-    rel_v = np.array([[[-460.0, 0.0]], [[-100.0, 0.0]], [[-460.0, 0.0]]])  # passes 10 km off; diverging
+    rel_v = np.array(
+        [[[-460.0, 0.0]], [[-100.0, 0.0]], [[-460.0, 0.0]]]
+    )  # passes 10 km off; diverging
     valid = np.array([[True], [True], [False]])  # third: an empty slot
     out = mvp.resolve(own_v, rel_p, rel_v, valid, np.full(3, 0.1))
     assert not out.conflict.any() and np.all(out.heading_change == 0)
@@ -315,8 +337,10 @@ def test_mvp_keeps_a_ring_apart_better_than_nothing(clean_registry):
 
     los = {}
     for kind in ("none", "mvp"):
-        sc = load("ring", [f"resolver.kind={kind}", "traffic.count=8", "traffic.radius=10000",
-                           "duration=70"])
+        sc = load(
+            "ring",
+            [f"resolver.kind={kind}", "traffic.count=8", "traffic.radius=10000", "duration=70"],
+        )
         world = World(sc, seed=0)
         m = world.run()
         los[kind] = (m["los_events"], m["min_separation_m"])

@@ -10,8 +10,7 @@ import numpy as np
 import pytest
 
 from airspace_sim.errors import UserError
-from airspace_sim.scenarios import available, build_aircraft, from_dict, load, schema
-from airspace_sim.scenarios import loader
+from airspace_sim.scenarios import available, build_aircraft, from_dict, load, loader, schema
 from airspace_sim.scenarios.traffic import miss_distance, ring_min_radius
 
 SHIPPED = ["paper_encounter", "head_on", "crossing", "overtaking", "ring", "dense_random", "demo"]
@@ -59,9 +58,11 @@ def test_paper_encounter_matches_the_paper():
         assert v <= intruder.speed <= 2 * v
         rel = np.subtract(intruder.position, own.position)
         assert np.hypot(*rel) == pytest.approx(4500.0)
-        vel = lambda a: a.speed * np.array(  # noqa: E731
-            [math.cos(math.radians(a.heading_deg)), math.sin(math.radians(a.heading_deg))]
-        )
+
+        def vel(a):
+            h = math.radians(a.heading_deg)
+            return a.speed * np.array([math.cos(h), math.sin(h)])
+
         d, t_cpa = miss_distance(rel, vel(intruder) - vel(own))
         assert d < 3000.0 and t_cpa > 0
         assert intruder.autopilot == "markov" and not intruder.avoid
@@ -78,8 +79,15 @@ def test_range_table_names_existing_fields():
 
 
 def test_every_schema_field_type_is_supported():
-    for cls in (schema.Scenario, schema.Separation, schema.SensorSpec, schema.TrackerSpec,
-                schema.ResolverSpec, schema.AircraftSpec, schema.TrafficSpec):
+    for cls in (
+        schema.Scenario,
+        schema.Separation,
+        schema.SensorSpec,
+        schema.TrackerSpec,
+        schema.ResolverSpec,
+        schema.AircraftSpec,
+        schema.TrafficSpec,
+    ):
         for name, tp in typing.get_type_hints(cls, vars(schema)).items():
             assert loader.describe(tp), (cls.__name__, name)
 
@@ -118,17 +126,31 @@ speed = {speed}
         (BASE + "[traffic]\ncout = 3\n", "traffic.cout", "3", "unknown key"),
         (BASE + "dt = 'fast'\n", "dt", "'fast'", "positive number"),
         (BASE + "dt = 0\n", "dt", "0", "positive number"),
-        (BASE + "[sensor]\ndetection_probability = 1.5\n", "sensor.detection_probability", "1.5", "[0, 1]"),
+        (
+            BASE + "[sensor]\ndetection_probability = 1.5\n",
+            "sensor.detection_probability",
+            "1.5",
+            "[0, 1]",
+        ),
         (BASE + "[sensor]\nrange = true\n", "sensor.range", "true", "positive number"),
         (BASE + "[traffic]\npattern = 'spiral'\n", "traffic.pattern", "'spiral'", "one of"),
         (BASE + "model = 'nope'\n", "model", "'nope'", "one of"),
         (BASE + "[separation]\nr_safe = nan\n", "separation.r_safe", "nan", "positive number"),
         (BASE + AIRCRAFT.format(speed="-1.0"), "aircraft[1].speed", "-1.0", "positive"),
         (BASE + AIRCRAFT.format(speed='"x"'), "aircraft[1].speed", "'x'", "positive number"),
-        (BASE + AIRCRAFT.format(speed="1.0") + "color = 'red'\n", "aircraft[1].color", "'red'", "unknown key"),
+        (
+            BASE + AIRCRAFT.format(speed="1.0") + "color = 'red'\n",
+            "aircraft[1].color",
+            "'red'",
+            "unknown key",
+        ),
         (BASE + "separation = 5\n", "separation", "5", "table"),
-        (BASE + "[[aircraft]]\nid = 'a'\nposition = [0, 0, 0]\nheading_deg = 0\nspeed = 1\n",
-         "aircraft[0].position", "[0, 0, 0]", "list of 2 numbers"),
+        (
+            BASE + "[[aircraft]]\nid = 'a'\nposition = [0, 0, 0]\nheading_deg = 0\nspeed = 1\n",
+            "aircraft[0].position",
+            "[0, 0, 0]",
+            "list of 2 numbers",
+        ),
     ],
 )
 def test_bad_value_gives_one_line_with_file_key_value(tmp_path, text, key, value, expect):
@@ -207,8 +229,16 @@ def test_unknown_scenario_name_lists_known():
 
 
 def test_overrides_apply_before_validation():
-    sc = load("ring", ["traffic.count=64", "traffic.radius=70000", "sensor.kind=radar",
-                       "resolver.params.gain=2.5", "duration=10"])
+    sc = load(
+        "ring",
+        [
+            "traffic.count=64",
+            "traffic.radius=70000",
+            "sensor.kind=radar",
+            "resolver.params.gain=2.5",
+            "duration=10",
+        ],
+    )
     assert sc.traffic.count == 64 and sc.traffic.radius == 70000.0
     assert isinstance(sc.traffic.radius, float)
     assert sc.resolver.params == {"gain": 2.5}
@@ -231,7 +261,10 @@ def test_override_list_index_and_list_value():
         ("traffic.count=-3", "--set traffic.count: expected a non-negative integer, got -3"),
         ("traffic.cout=3", "--set traffic.cout: unknown key"),
         ("trafic.count=3", "--set trafic: unknown key"),
-        ("sensor.detection_probability=2", "--set sensor.detection_probability: expected a probability"),
+        (
+            "sensor.detection_probability=2",
+            "--set sensor.detection_probability: expected a probability",
+        ),
         ("aircraft[5].speed=3", "--set aircraft[5].speed: index 5 out of range"),
         ("dt.x=3", "--set dt.x: dt is not a table"),
         ("traffic.count", "--set traffic.count: expected key=value"),
@@ -257,8 +290,13 @@ def test_file_error_still_names_file_when_overrides_are_fine(tmp_path):
 
 
 def _ring(count=12, radius=30000.0, r_safe=3000.0, **traffic):
-    return from_dict({"name": "r", "separation": {"r_safe": r_safe},
-                      "traffic": {"pattern": "ring", "count": count, "radius": radius, **traffic}})
+    return from_dict(
+        {
+            "name": "r",
+            "separation": {"r_safe": r_safe},
+            "traffic": {"pattern": "ring", "count": count, "radius": radius, **traffic},
+        }
+    )
 
 
 def test_ring_geometry_closed_form():
@@ -271,7 +309,7 @@ def test_ring_geometry_closed_form():
     np.testing.assert_allclose(np.diff(angles), 2 * np.pi / n)
     chords = np.hypot(*(pos - np.roll(pos, -1, axis=0)).T)
     np.testing.assert_allclose(chords, 2 * R * math.sin(math.pi / n))
-    for a, p in zip(ac, pos):
+    for a, p in zip(ac, pos, strict=True):
         h = math.radians(a.heading_deg)
         to_centre = -p / np.hypot(*p)
         np.testing.assert_allclose([math.cos(h), math.sin(h)], to_centre, atol=1e-12)
@@ -298,8 +336,14 @@ def test_ring_speed_spread_and_controlled():
 
 
 def _random(count=40, sector=60000.0, r_safe=3000.0, aircraft=()):
-    return from_dict({"name": "s", "separation": {"r_safe": r_safe}, "aircraft": list(aircraft),
-                      "traffic": {"pattern": "random", "count": count, "sector": sector}})
+    return from_dict(
+        {
+            "name": "s",
+            "separation": {"r_safe": r_safe},
+            "aircraft": list(aircraft),
+            "traffic": {"pattern": "random", "count": count, "sector": sector},
+        }
+    )
 
 
 def test_random_traffic_respects_separation_and_sector():
@@ -314,7 +358,7 @@ def test_random_traffic_respects_separation_and_sector():
         assert d.min() > 3000.0
         assert np.all(np.abs(pos) <= 30000.0)
         for a in ac[1:]:
-            (wx, wy), = a.waypoints
+            ((wx, wy),) = a.waypoints
             assert math.isclose(max(abs(wx), abs(wy)), 30000.0)  # on the sector's edge
             assert math.hypot(wx - a.position[0], wy - a.position[1]) >= 30000.0
             h = math.radians(a.heading_deg)
@@ -337,8 +381,13 @@ def test_random_traffic_too_dense_is_a_user_error():
 
 def test_generated_id_clash_is_a_user_error():
     hand = {"id": "ring00", "position": [0.0, 0.0], "heading_deg": 0.0, "speed": 200.0}
-    sc = from_dict({"name": "x", "aircraft": [hand],
-                    "traffic": {"pattern": "ring", "count": 4, "radius": 20000.0}})
+    sc = from_dict(
+        {
+            "name": "x",
+            "aircraft": [hand],
+            "traffic": {"pattern": "ring", "count": 4, "radius": 20000.0},
+        }
+    )
     with pytest.raises(UserError, match="ring00"):
         build_aircraft(sc, 0)
 

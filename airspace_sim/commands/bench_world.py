@@ -33,11 +33,26 @@ def _positive_int(text: str) -> int:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--sizes", type=_positive_int, nargs="+", default=[100, 1000], metavar="N",
-                        help="numbers of aircraft (default: 100 1000)")
-    parser.add_argument("--steps", type=_positive_int, default=10, help="timed steps per size, after 5 untimed warm-up steps (default 10)")
-    parser.add_argument("--trackers", choices=("both", "on", "off"), default="both",
-                        help="run with trackers, without, or both (default)")
+    parser.add_argument(
+        "--sizes",
+        type=_positive_int,
+        nargs="+",
+        default=[100, 1000],
+        metavar="N",
+        help="numbers of aircraft (default: 100 1000)",
+    )
+    parser.add_argument(
+        "--steps",
+        type=_positive_int,
+        default=10,
+        help="timed steps per size, after 5 untimed warm-up steps (default 10)",
+    )
+    parser.add_argument(
+        "--trackers",
+        choices=("both", "on", "off"),
+        default="both",
+        help="run with trackers, without, or both (default)",
+    )
     parser.add_argument("--json", metavar="PATH", help="also write the results as JSON")
 
 
@@ -59,24 +74,37 @@ def growth(rows: list[dict]) -> list[dict]:
     out = []
     for trackers in dict.fromkeys(r["trackers"] for r in rows):
         rs = sorted((r for r in rows if r["trackers"] == trackers), key=lambda r: r["aircraft"])
-        for a, b in zip(rs, rs[1:]):
+        for a, b in zip(rs, rs[1:], strict=False):
             ratio = a["steps_per_second"] / b["steps_per_second"]  # time per step, b over a
             n_ratio = b["aircraft"] / a["aircraft"]
-            exponent = math.log(ratio) / math.log(n_ratio) if ratio > 0 and n_ratio > 1 else float("nan")
-            out.append({"trackers": trackers, "from": a["aircraft"], "to": b["aircraft"],
-                        "time_ratio": ratio, "exponent": exponent})
+            exponent = (
+                math.log(ratio) / math.log(n_ratio) if ratio > 0 and n_ratio > 1 else float("nan")
+            )
+            out.append(
+                {
+                    "trackers": trackers,
+                    "from": a["aircraft"],
+                    "to": b["aircraft"],
+                    "time_ratio": ratio,
+                    "exponent": exponent,
+                }
+            )
     return out
 
 
 def format_report(rows: list[dict], grow: list[dict]) -> str:
-    lines = [f"{'aircraft':>8}  {'trackers':>8}  {'steps/s':>10}  {'ms/step':>9}  "
-             f"{'aircraft-steps/s':>16}  {'tracks':>8}"]
+    lines = [
+        f"{'aircraft':>8}  {'trackers':>8}  {'steps/s':>10}  {'ms/step':>9}  "
+        f"{'aircraft-steps/s':>16}  {'tracks':>8}"
+    ]
     for r in rows:
         sps = r["steps_per_second"]
         tracks = (r.get("raw") or {}).get("mean_tracks")
         tracks = "-" if tracks is None else f"{tracks:.0f}"
-        lines.append(f"{r['aircraft']:>8}  {('on' if r['trackers'] else 'off'):>8}  {sps:>10.1f}  "
-                     f"{1000.0 / sps:>9.2f}  {sps * r['aircraft']:>16.0f}  {tracks:>8}")
+        lines.append(
+            f"{r['aircraft']:>8}  {('on' if r['trackers'] else 'off'):>8}  {sps:>10.1f}  "
+            f"{1000.0 / sps:>9.2f}  {sps * r['aircraft']:>16.0f}  {tracks:>8}"
+        )
     if grow:
         lines.append("")
         for g in grow:
@@ -99,9 +127,15 @@ def run(args) -> int:
     for trackers in settings:
         for n in args.sizes:
             result = bench_world(n, args.steps, trackers)
-            rows.append({"aircraft": n, "trackers": trackers, "steps": args.steps,
-                         "steps_per_second": steps_per_second(result),
-                         "raw": result if isinstance(result, dict) else None})
+            rows.append(
+                {
+                    "aircraft": n,
+                    "trackers": trackers,
+                    "steps": args.steps,
+                    "steps_per_second": steps_per_second(result),
+                    "raw": result if isinstance(result, dict) else None,
+                }
+            )
     grow = growth(rows)
     print(format_report(rows, grow))
     if args.json:
@@ -110,7 +144,9 @@ def run(args) -> int:
         path = Path(args.json)
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
-            path.write_text(json.dumps(jsonable({"results": rows, "growth": grow}), indent=2) + "\n")
+            path.write_text(
+                json.dumps(jsonable({"results": rows, "growth": grow}), indent=2) + "\n"
+            )
         except OSError as exc:
             raise UserError(f"--json {path}: cannot write: {exc}") from None
     return 0

@@ -57,33 +57,82 @@ def _size(text: str) -> tuple[int, int]:
     try:
         w, h = (int(v) for v in text.lower().split("x"))
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT in pixels, e.g. 800x800, got {text!r}") from None
+        raise argparse.ArgumentTypeError(
+            f"expected WIDTHxHEIGHT in pixels, e.g. 800x800, got {text!r}"
+        ) from None
     if w < 64 or h < 64:
         raise argparse.ArgumentTypeError(f"expected at least 64x64 pixels, got {text!r}")
     return w, h
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("scenario", nargs="?", help="scenario name (see --list) or path to a .toml file")
-    parser.add_argument("--list", action="store_true", help="list the shipped scenarios and exit")
-    parser.add_argument("--steps", type=_positive_int, help="world steps to run (default: the scenario's duration / dt)")
-    parser.add_argument("--seed", type=_non_negative_int, help="random seed (default: the scenario's seed)")
     parser.add_argument(
-        "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-        help="override a scenario key, e.g. --set traffic.count=64 (repeatable; value parsed as TOML)",
+        "scenario", nargs="?", help="scenario name (see --list) or path to a .toml file"
     )
-    parser.add_argument("--render", metavar="DIR", help="write a PNG per step (frame_00000.png, ...) and summary.json into DIR")
+    parser.add_argument("--list", action="store_true", help="list the shipped scenarios and exit")
+    parser.add_argument(
+        "--steps",
+        type=_positive_int,
+        help="world steps to run (default: the scenario's duration / dt)",
+    )
+    parser.add_argument(
+        "--seed", type=_non_negative_int, help="random seed (default: the scenario's seed)"
+    )
+    parser.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a scenario key, e.g. --set traffic.count=64 "
+        "(repeatable; the value is parsed as TOML)",
+    )
+    parser.add_argument(
+        "--render",
+        metavar="DIR",
+        help="write a PNG per step (frame_00000.png, ...) and summary.json into DIR",
+    )
     video = parser.add_mutually_exclusive_group()
     video.add_argument("--gif", action="store_true", help="also write DIR/run.gif (needs --render)")
-    video.add_argument("--mp4", action="store_true", help="also write DIR/run.mp4 (needs --render and imageio-ffmpeg)")
-    parser.add_argument("--every", type=_positive_int, default=1, metavar="N", help="render every N-th step (default 1)")
-    parser.add_argument("--size", type=_size, default=(800, 800), metavar="WxH", help="frame size in pixels (default 800x800)")
-    parser.add_argument("--fps", type=float, default=10.0, help="frames per second of the GIF/MP4 (default 10)")
+    video.add_argument(
+        "--mp4",
+        action="store_true",
+        help="also write DIR/run.mp4 (needs --render and imageio-ffmpeg)",
+    )
+    parser.add_argument(
+        "--every",
+        type=_positive_int,
+        default=1,
+        metavar="N",
+        help="render every N-th step (default 1)",
+    )
+    parser.add_argument(
+        "--size",
+        type=_size,
+        default=(800, 800),
+        metavar="WxH",
+        help="frame size in pixels (default 800x800)",
+    )
+    parser.add_argument(
+        "--fps", type=float, default=10.0, help="frames per second of the GIF/MP4 (default 10)"
+    )
     parser.add_argument("--json", metavar="PATH", help="write the summary as JSON to PATH")
-    parser.add_argument("--checkpoint", metavar="PATH", help="save the world to PATH at the end (and on Ctrl-C) to resume later")
-    parser.add_argument("--checkpoint-every", type=_positive_int, metavar="N",
-                        help="also save the checkpoint every N steps (survives a killed run)")
-    parser.add_argument("--resume", metavar="PATH", help="continue a run saved with --checkpoint (the scenario argument is optional)")
+    parser.add_argument(
+        "--checkpoint",
+        metavar="PATH",
+        help="save the world to PATH at the end (and on Ctrl-C) to resume later",
+    )
+    parser.add_argument(
+        "--checkpoint-every",
+        type=_positive_int,
+        metavar="N",
+        help="also save the checkpoint every N steps (survives a killed run)",
+    )
+    parser.add_argument(
+        "--resume",
+        metavar="PATH",
+        help="continue a run saved with --checkpoint (the scenario argument is optional)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar and no table")
 
 
@@ -194,7 +243,10 @@ class _Frames:
                     self._mp4 = iio2.get_writer(directory / "run.mp4", fps=fps, macro_block_size=1)
             except (ImportError, ValueError, RuntimeError) as exc:
                 first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
-                raise UserError(f"--mp4 needs the ffmpeg plugin of imageio (pip install imageio-ffmpeg): {first}") from None
+                raise UserError(
+                    "--mp4 needs the ffmpeg plugin of imageio "
+                    f"(pip install imageio-ffmpeg): {first}"
+                ) from None
 
     def add(self, snapshot: dict) -> None:
         import imageio.v3 as iio
@@ -217,14 +269,18 @@ class _Frames:
                 # Fast octree quantisation (~5x quicker than Pillow's default median cut);
                 # frames have a few hundred colours, so 256 lose nothing visible.
                 with Image.open(path) as im:
-                    return im.convert("RGB").quantize(256, method=Image.Quantize.FASTOCTREE,
-                                                      dither=Image.Dither.NONE)
+                    return im.convert("RGB").quantize(
+                        256, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE
+                    )
 
             out = self.directory / "run.gif"
             # Frames are read back one at a time: memory stays at one frame, not the run.
             paletted(self.paths[0]).save(
-                out, save_all=True, append_images=(paletted(p) for p in self.paths[1:]),
-                duration=int(round(1000 / self.fps)), loop=0,
+                out,
+                save_all=True,
+                append_images=(paletted(p) for p in self.paths[1:]),
+                duration=int(round(1000 / self.fps)),
+                loop=0,
             )
             return out
         return None
@@ -250,8 +306,12 @@ def save_checkpoint(path: Path, world, scenario, meta: dict) -> str:
     except OSError as exc:
         raise UserError(f"--checkpoint {path}: cannot create folder: {exc}") from None
     tmp = path.with_name(path.name + ".tmp")
-    record = {"format": CHECKPOINT_FORMAT, "meta": meta, "scenario": scenario,
-              "steps_taken": int(world.step_count)}
+    record = {
+        "format": CHECKPOINT_FORMAT,
+        "meta": meta,
+        "scenario": scenario,
+        "steps_taken": int(world.step_count),
+    }
     try:
         blob = pickle.dumps(world, protocol=pickle.HIGHEST_PROTOCOL)
         record["world"], how = blob, "pickle"
@@ -280,7 +340,9 @@ def load_checkpoint(path: Path, quiet: bool = True):
     except FileNotFoundError:
         raise UserError(f"--resume {path}: no such file") from None
     except Exception as exc:  # noqa: BLE001 - corrupt or foreign file
-        raise UserError(f"--resume {path}: not a readable checkpoint ({type(exc).__name__}: {exc})") from None
+        raise UserError(
+            f"--resume {path}: not a readable checkpoint ({type(exc).__name__}: {exc})"
+        ) from None
     if not isinstance(record, dict) or record.get("format") != CHECKPOINT_FORMAT:
         raise UserError(f"--resume {path}: not an airspace-sim checkpoint")
     meta = record["meta"]
@@ -291,8 +353,14 @@ def load_checkpoint(path: Path, quiet: bool = True):
     from airspace_sim.world import World
 
     world = World(record["scenario"], seed=meta["seed"])
-    for _ in tqdm(range(record["steps_taken"]), desc="replaying", unit="step", leave=False,
-                  disable=quiet or not sys.stderr.isatty(), file=sys.stderr):
+    for _ in tqdm(
+        range(record["steps_taken"]),
+        desc="replaying",
+        unit="step",
+        leave=False,
+        disable=quiet or not sys.stderr.isatty(),
+        file=sys.stderr,
+    ):
         world.step()
     return world, meta
 
@@ -309,7 +377,9 @@ def run(args) -> int:
             print(f"{name:<18} {sc.description}")
         return 0
     if (args.gif or args.mp4) and not args.render:
-        raise UserError(f"--{'gif' if args.gif else 'mp4'} needs --render DIR (the frames go there)")
+        raise UserError(
+            f"--{'gif' if args.gif else 'mp4'} needs --render DIR (the frames go there)"
+        )
     if args.fps <= 0:
         raise UserError(f"--fps: expected a positive number, got {args.fps:g}")
 
@@ -318,16 +388,28 @@ def run(args) -> int:
             raise UserError("--resume continues a saved run: --set and --seed cannot change it")
         world, meta = load_checkpoint(Path(args.resume), quiet=args.quiet)
         if args.scenario and args.scenario not in (meta["scenario"], meta.get("source")):
-            raise UserError(f"--resume {args.resume}: it holds scenario {meta['scenario']!r}, not {args.scenario!r}")
-        name, source, seed, overrides = meta["scenario"], meta["source"], meta["seed"], meta["overrides"]
+            raise UserError(
+                f"--resume {args.resume}: it holds scenario {meta['scenario']!r}, "
+                f"not {args.scenario!r}"
+            )
+        name, source, seed, overrides = (
+            meta["scenario"],
+            meta["source"],
+            meta["seed"],
+            meta["overrides"],
+        )
         sc = world.scenario
         remaining = max(0, meta["total_steps"] - world.step_count)
         if not args.steps and not remaining:
-            raise UserError(f"--resume {args.resume}: that run is complete; give --steps N to run further")
+            raise UserError(
+                f"--resume {args.resume}: that run is complete; give --steps N to run further"
+            )
         steps = args.steps or remaining
     else:
         if not args.scenario:
-            raise UserError("missing SCENARIO (a name from `airspace-sim run --list` or a .toml path)")
+            raise UserError(
+                "missing SCENARIO (a name from `airspace-sim run --list` or a .toml path)"
+            )
         sc = scenarios.load(args.scenario, args.overrides)
         seed = sc.seed if args.seed is None else args.seed
         steps = args.steps or sc.n_steps
@@ -338,7 +420,12 @@ def run(args) -> int:
 
     frames = None
     if args.render:
-        frames = _Frames(Path(args.render), args.size, "gif" if args.gif else "mp4" if args.mp4 else None, args.fps)
+        frames = _Frames(
+            Path(args.render),
+            args.size,
+            "gif" if args.gif else "mp4" if args.mp4 else None,
+            args.fps,
+        )
         frames.add(world.snapshot())
 
     from tqdm import tqdm
@@ -348,19 +435,32 @@ def run(args) -> int:
     planned_total = world.step_count + steps
 
     def checkpoint_meta() -> dict:
-        return {"scenario": name, "source": source, "seed": seed, "overrides": overrides,
-                "total_steps": planned_total}
+        return {
+            "scenario": name,
+            "source": source,
+            "seed": seed,
+            "overrides": overrides,
+            "total_steps": planned_total,
+        }
 
     start_step = world.step_count
     interrupted = False
     t0 = time.perf_counter()
-    bar = tqdm(total=steps, unit="step", desc=name, disable=args.quiet or not sys.stderr.isatty(),
-               file=sys.stderr, leave=False)
+    bar = tqdm(
+        total=steps,
+        unit="step",
+        desc=name,
+        disable=args.quiet or not sys.stderr.isatty(),
+        file=sys.stderr,
+        leave=False,
+    )
     try:
         for k in range(steps):
             world.step()
             everybody_left = not world.active.any()  # nothing more to see: stop early
-            if frames is not None and ((k + 1) % args.every == 0 or k + 1 == steps or everybody_left):
+            if frames is not None and (
+                (k + 1) % args.every == 0 or k + 1 == steps or everybody_left
+            ):
                 frames.add(world.snapshot())
             bar.update(1)
             if args.checkpoint_every and (k + 1) % args.checkpoint_every == 0 and k + 1 < steps:
@@ -405,7 +505,10 @@ def run(args) -> int:
     if not args.quiet:
         print(format_table(summary))
         if frames is not None:
-            print(f"\n{len(frames.paths)} frames in {frames.directory}" + (f", {video}" if video else ""))
+            print(
+                f"\n{len(frames.paths)} frames in {frames.directory}"
+                + (f", {video}" if video else "")
+            )
         if args.checkpoint:
             print(f"checkpoint ({summary['checkpoint']}) in {args.checkpoint}")
     if interrupted:

@@ -256,7 +256,9 @@ def _convert(value: Any, tp, path: str) -> Any:
             return tuple(_convert(v, args[0], f"{path}[{i}]") for i, v in enumerate(value))
         if len(value) != len(args):
             raise _type_error(tp, value, path)
-        return tuple(_convert(v, a, f"{path}[{i}]") for i, (v, a) in enumerate(zip(value, args)))
+        return tuple(
+            _convert(v, a, f"{path}[{i}]") for i, (v, a) in enumerate(zip(value, args, strict=True))
+        )
     if origin is list or tp is list:
         if not isinstance(value, (list, tuple)):
             raise _type_error(tp, value, path)
@@ -300,7 +302,9 @@ def build_dataclass(cls, table: Any, path: str = ""):
             if required:
                 raise Invalid(key_path, f"missing (required: {describe(hints[name])})")
             continue
-        kwargs[name] = convert(table[name], hints[name], key_path, RANGES.get(f"{cls.__name__}.{name}"))
+        kwargs[name] = convert(
+            table[name], hints[name], key_path, RANGES.get(f"{cls.__name__}.{name}")
+        )
     return cls(**kwargs)
 
 
@@ -334,24 +338,36 @@ def check_scenario(sc: Scenario) -> None:
             f"expected at most traffic.count ({t.count}), got {t.controlled}",
         )
     if t.pattern != "none" and t.count == 0:
-        raise Invalid("traffic.count", f"expected a positive integer for pattern {t.pattern!r}, got 0")
+        raise Invalid(
+            "traffic.count", f"expected a positive integer for pattern {t.pattern!r}, got 0"
+        )
     if t.pattern == "none" and t.count > 0:
-        raise Invalid("traffic.pattern", f"expected ring, random or encounter with count {t.count}, got 'none'")
+        raise Invalid(
+            "traffic.pattern",
+            f"expected ring, random or encounter with count {t.count}, got 'none'",
+        )
     if t.speed_spread >= t.speed:
         raise Invalid(
             "traffic.speed_spread",
             f"expected less than traffic.speed ({t.speed:g} m/s), got {t.speed_spread:g}",
         )
     if t.pattern == "encounter" and not sc.aircraft:
-        raise Invalid("traffic.pattern", "expected an aircraft[0] (the ownship) for pattern 'encounter', got none")
+        raise Invalid(
+            "traffic.pattern",
+            "expected an aircraft[0] (the ownship) for pattern 'encounter', got none",
+        )
 
 
 # --------------------------------------------------------------------------- files
 
 
 def scenario_dirs() -> list[Path]:
-    """Folders searched for scenario names: the repository's ``scenarios/``, then ``./scenarios``."""
-    dirs = [Path(airspace_sim.__file__).resolve().parent.parent / "scenarios", Path.cwd() / "scenarios"]
+    """Folders searched for scenario names: the repository's ``scenarios/``, then
+    ``./scenarios``."""
+    dirs = [
+        Path(airspace_sim.__file__).resolve().parent.parent / "scenarios",
+        Path.cwd() / "scenarios",
+    ]
     out = []
     for d in dirs:
         if d.is_dir() and d.resolve() not in [o.resolve() for o in out]:
@@ -411,7 +427,9 @@ def parse_toml(text: str, source: str) -> dict:
         raise UserError(f"{source}: invalid TOML at line {line}, column {col}: {msg}") from None
 
 
-def from_dict(data: dict, source: str = "<memory>", overrides: Iterable[str] = (), name: str | None = None) -> Scenario:
+def from_dict(
+    data: dict, source: str = "<memory>", overrides: Iterable[str] = (), name: str | None = None
+) -> Scenario:
     """Validate a TOML-like dict (after applying ``overrides``) into a :class:`Scenario`."""
     import copy
 

@@ -27,7 +27,9 @@ def parse_key(key: str) -> list[str | int]:
     for segment in key.split("."):
         m = _SEGMENT.match(segment)
         if not m:
-            raise UserError(f"--set {key}: malformed key (expected e.g. traffic.count or aircraft[0].speed)")
+            raise UserError(
+                f"--set {key}: malformed key (expected e.g. traffic.count or aircraft[0].speed)"
+            )
         parts.append(m.group(1))
         parts.extend(int(i) for i in re.findall(r"\[(\d+)\]", m.group(2)))
     return parts

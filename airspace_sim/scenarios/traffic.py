@@ -34,7 +34,9 @@ from airspace_sim.scenarios.schema import AircraftSpec, Scenario
 MAX_TRIES = 2000  # rejection-sampling attempts per aircraft
 
 
-def build_aircraft(scenario: Scenario, rng: np.random.Generator | int | None = None) -> list[AircraftSpec]:
+def build_aircraft(
+    scenario: Scenario, rng: np.random.Generator | int | None = None
+) -> list[AircraftSpec]:
     """Hand-placed aircraft (copies) followed by the generated traffic, seeded by ``rng``."""
     rng = np.random.default_rng(rng) if not isinstance(rng, np.random.Generator) else rng
     hand = [dataclasses.replace(a, waypoints=list(a.waypoints)) for a in scenario.aircraft]
