@@ -185,9 +185,17 @@ def describe(tp) -> str:
 
 
 def _plural(tp) -> str:
-    return {float: "numbers", int: "integers", str: "strings", bool: "booleans"}.get(
-        tp, "tables" if dataclasses.is_dataclass(tp) or tp is dict else describe(tp)
-    )
+    simple = {float: "numbers", int: "integers", str: "strings", bool: "booleans"}
+    if tp in simple:
+        return simple[tp]
+    if dataclasses.is_dataclass(tp) or tp is dict or typing.get_origin(tp) is dict:
+        return "tables"
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin is tuple and args and Ellipsis not in args and len(set(args)) == 1:
+        return f"lists of {len(args)} {_plural(args[0])}"  # e.g. [x, y] points
+    if origin in (tuple, list):
+        return "lists"
+    return describe(tp)
 
 
 def convert(value: Any, tp, path: str, check: Callable | None = None) -> Any:
