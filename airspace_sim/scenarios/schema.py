@@ -48,6 +48,19 @@ class ResolverSpec:
     lookahead: float = 120.0  #: look-ahead in seconds
     margin: float = 0.1  #: extra fraction of r_safe kept clear
     params: dict = field(default_factory=dict)  #: extra keyword arguments for the resolver
+    #: half-width in degrees of the heading range searched for a clear heading; the aircraft
+    #: turns toward the chosen heading at its turn-rate limit (world CDA policy)
+    search_deg: float = 90.0
+    #: side of the avoidance turn, kept for the whole conflict episode: "right" (prefer a
+    #: right turn, rules of the air), "nearest" (the resolver's choice) or "none" (no
+    #: commitment: the resolver's advice every step)
+    turn_preference: str = "right"
+    #: seconds a track must exist before the resolver uses it (fresh tracks' velocities are
+    #: poor)
+    confirm_s: float = 5.0
+    #: extra fraction of r_safe (on top of margin) that a turn back toward the route must
+    #: keep clear over the look-ahead
+    resume_margin: float = 0.2
 
 
 @dataclass
