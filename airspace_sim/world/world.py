@@ -162,6 +162,8 @@ class World:
         self.advice = np.zeros(n)
         self.conflict = np.zeros(n, dtype=bool)
         self._following = np.zeros(n, dtype=bool)
+        self._prev_contacts = ()  # positions, LoS and NMAC keys at the previous step
+        self._side = np.zeros(n)  # committed avoidance side per aircraft: −1 right, +1 left
         self._enc = Encounters(np.zeros(0, np.int64), np.zeros((0, 0), np.int64),
                                np.zeros((0, 0, 2)), np.zeros((0, 0, 2)), np.zeros((0, 0), bool))
         self._after_motion(initial=True)
@@ -282,14 +284,17 @@ class World:
         # detection and advice for the coming step
         runs = self.trackers_on & self.active
         t = self.tracks
-        self._enc = gather(t.owner, t.x, self.positions, self.velocities, runs)
+        ok = t.age >= self.avoidance.confirm_steps  # confirmed tracks only
+        self._enc = gather(t.owner[ok], t.x[ok], self.positions, self.velocities, runs)
         self.advice, self.conflict = self.avoidance.advise(self._enc, self.velocities,
-                                                           self.max_turn_rate * self.dt, n)
+                                                           self.max_turn_rate * self.dt, n,
+                                                           self._side)
         self.conflict &= self.active
         # metrics
         m = self.metrics_acc
         m.contacts(self.positions, sp.pairs[LOS], sp.began[LOS], sp.pairs[NMAC], sp.began[NMAC],
-                   sp.pairs[RANGE])
+                   sp.pairs[RANGE], *self._prev_contacts)
+        self._prev_contacts = (self.positions.copy(), sp.pairs[LOS].copy(), sp.pairs[NMAC].copy())
         m.conflicts(self.conflict)
         if not initial and len(t):
             x = t.x
