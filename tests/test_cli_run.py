@@ -192,6 +192,27 @@ def test_jsonable_and_table():
     assert any(line.split() == ["min_sep", "1235"] for line in lines), table
 
 
+def test_track_owners_default_and_choice():
+    from types import SimpleNamespace
+
+    from airspace_sim.errors import UserError
+
+    ids = ["markov1", "markov2", "ownship", "ring00"]
+    world = SimpleNamespace(
+        ids=ids, controlled=np.zeros(4, bool), avoid=np.array([False, False, True, True])
+    )
+    assert run_cmd.track_owners(world, None) == ["ownship"]  # first aircraft that tracks
+    assert run_cmd.track_owners(world, "all") == "all"
+    assert run_cmd.track_owners(world, "ring00, markov1") == ["ring00", "markov1"]
+    with pytest.raises(UserError, match="--owners: no aircraft 'nope'"):
+        run_cmd.track_owners(world, "ring00,nope")
+    world.controlled[3] = True
+    assert run_cmd.track_owners(world, None) is None  # the renderer's default: the agents
+    world.controlled[3] = False
+    world.avoid[:] = False
+    assert run_cmd.track_owners(world, None) is None
+
+
 # --------------------------------------------------------------------------- real runs
 
 

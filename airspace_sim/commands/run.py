@@ -116,6 +116,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--fps", type=float, default=10.0, help="frames per second of the GIF/MP4 (default 10)"
     )
+    parser.add_argument(
+        "--owners",
+        metavar="IDS",
+        help="whose tracks to draw: comma-separated aircraft ids, or 'all' "
+        "(default: the RL agents, else the first aircraft that tracks)",
+    )
     parser.add_argument("--json", metavar="PATH", help="write the summary as JSON to PATH")
     parser.add_argument(
         "--checkpoint",
@@ -214,10 +220,32 @@ def _write_json(path: Path, summary: dict) -> None:
         raise UserError(f"cannot write {path}: {exc}") from None
 
 
+def track_owners(world, text: str | None):
+    """The renderer's ``owners``: ``--owners`` ids or "all"; by default the RL agents, else
+    the first aircraft that tracks (avoids), else aircraft 0."""
+    if text:
+        if text.strip() == "all":
+            return "all"
+        ids = [t.strip() for t in text.split(",") if t.strip()]
+        unknown = [i for i in ids if i not in world.ids]
+        if unknown or not ids:
+            known = ", ".join(world.ids[:12]) + (", ..." if len(world.ids) > 12 else "")
+            bad = unknown[0] if unknown else text
+            raise UserError(f"--owners: no aircraft {bad!r} (ids: {known})")
+        return ids
+    import numpy as np
+
+    controlled = np.flatnonzero(world.controlled)
+    if controlled.size:
+        return None  # the renderer's own default: the RL agents
+    tracking = np.flatnonzero(np.asarray(world.avoid, dtype=bool))
+    return [world.ids[int(tracking[0])]] if tracking.size else None
+
+
 class _Frames:
     """Numbered PNG frames in a folder, plus an optional GIF or MP4 assembled from them."""
 
-    def __init__(self, directory: Path, size, video: str | None, fps: float):
+    def __init__(self, directory: Path, size, video: str | None, fps: float, owners=None):
         from airspace_sim.rendering import Renderer
 
         self.directory = directory
@@ -227,7 +255,7 @@ class _Frames:
             raise UserError(f"--render {directory}: cannot create folder: {exc}") from None
         for old in directory.glob("frame_*.png"):  # a shorter rerun must not leave stale frames
             old.unlink()
-        self.renderer = Renderer(*size)
+        self.renderer = Renderer(*size, owners=owners)
         self.video = video
         self.fps = fps
         self.paths: list[Path] = []
@@ -425,6 +453,7 @@ def run(args) -> int:
             args.size,
             "gif" if args.gif else "mp4" if args.mp4 else None,
             args.fps,
+            track_owners(world, args.owners),
         )
         frames.add(world.snapshot())
 
