@@ -306,3 +306,35 @@ def test_resume():
     assert clear[0] and psi[0] == pytest.approx(0.5)
     assert not clear[1] and psi[1] == 0.0  # the desired heading points at a head-on intruder
     assert clear[2] and psi[2] == pytest.approx(-0.2)  # limited
+
+
+def test_kernel_equals_numpy_reference():
+    from airspace_sim.avoidance.bands import cpa_min_ratio_numpy
+
+    rng = np.random.default_rng(11)
+    vo, r, v, valid = random_scene(rng, 9, 5)
+    r[~valid] = np.nan  # garbage in unused slots
+    v[~valid] = np.inf
+    cand = rng.uniform(-1.0, 1.0, (9, 30))
+    cand[0, 3] = np.nan
+    radius = rng.uniform(2000.0, 4000.0, (9, 5))
+    v[1, 0] = -vo[1] + rotate(vo[1], 0.2)  # zero relative velocity at candidate ψ = 0.2
+    cand[1, 0] = 0.2
+    a = cpa_min_ratio(vo, r, v, valid, cand, radius, 100.0)
+    b = cpa_min_ratio_numpy(vo, r, v, valid, cand, radius, 100.0)
+    assert np.array_equal(a, b, equal_nan=True)
+    assert np.isnan(a[0, 3]) and np.isfinite(a[1:]).all()
+
+
+def test_left_penalty_biases_toward_right_turns():
+    # intruder slightly right of dead ahead: the nearest clear heading is a left turn
+    vo = np.array([[0.0, 250.0]])
+    r = np.array([[[600.0, 20000.0]]])
+    v = np.array([[[0.0, -500.0]]])
+    valid = np.ones((1, 1), bool)
+    mx = np.array([np.pi / 2])
+    plain = band_search(vo, r, v, valid, mx, R, 120.0, 0.1)
+    assert plain.heading_change[0] > 0
+    biased = band_search(vo, r, v, valid, mx, R, 120.0, 0.1, left_penalty=np.radians(30))
+    assert biased.heading_change[0] < 0
+    assert biased.band[0][biased.candidates[0] == biased.heading_change[0]].all()

@@ -16,7 +16,7 @@ and (``exact_candidates=True``) the exact boundaries of each intruder's clear se
 (CPA inside the look-ahead) and ``d(T) = radius`` (CPA at the end of the look-ahead).
 
 Choice: the clear candidate of smallest ``|ψ|``; ties go to the right turn (``ψ < 0``), then to
-the lower candidate index. If none is clear, the candidate that maximises the minimum over
+the lower candidate index (optionally left turns rank as ``|ψ| + left_penalty``). If none is clear, the candidate that maximises the minimum over
 intruders of ``d / (r_safe·(1+margin))`` (for one common radius: of the CPA distance), tie-broken
 the same way. Angles radians CCW positive, distances metres, times seconds.
 """
@@ -26,6 +26,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from airspace_sim.avoidance.heading import (
     range_at_time_heading_changes,
@@ -62,6 +63,9 @@ class BandResult:
 def cpa_min_ratio(own_velocity, rel_position, rel_velocity, valid, candidates, radius, lookahead_s):
     """Minimum over intruders of (CPA distance over ``[0, T]``) / radius, per candidate.
 
+    A fused numba kernel (:func:`_cpa_kernel`) evaluates the ``(N, C, K)`` arithmetic without
+    temporaries; :func:`cpa_min_ratio_numpy` is the same formula in numpy (the reference).
+
     Parameters
     ----------
     own_velocity : (N, 2) m/s; rel_position : (N, K, 2) m; rel_velocity : (N, K, 2) m/s
@@ -75,31 +79,89 @@ def cpa_min_ratio(own_velocity, rel_position, rel_velocity, valid, candidates, r
     -------
     (N, C) array; ``inf`` where the ownship has no valid intruder.
     """
+    vo = np.ascontiguousarray(own_velocity, dtype=float)
+    valid = np.ascontiguousarray(valid, dtype=bool)
+    r = np.ascontiguousarray(rel_position, dtype=float)
+    v = np.ascontiguousarray(rel_velocity, dtype=float)
+    psi = np.ascontiguousarray(candidates, dtype=float)
+    radius = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, dtype=float), valid.shape))
+    return _cpa_kernel(vo, r, v, valid, psi, radius, float(lookahead_s))
+
+
+def cpa_min_ratio_numpy(
+    own_velocity, rel_position, rel_velocity, valid, candidates, radius, lookahead_s
+):
+    """:func:`cpa_min_ratio` in plain numpy, arrays ``(N, C, K)`` (reference for the kernel)."""
     vo = np.asarray(own_velocity, dtype=float)
-    r = np.asarray(rel_position, dtype=float)
-    vrel0 = np.asarray(rel_velocity, dtype=float)
     valid = np.asarray(valid, dtype=bool)
+    r = np.where(valid[..., None], np.asarray(rel_position, dtype=float), 0.0)
+    vrel0 = np.where(valid[..., None], np.asarray(rel_velocity, dtype=float), 0.0)
     psi = np.asarray(candidates, dtype=float)
+    if valid.shape[-1] == 0:
+        return np.full(psi.shape, np.inf)
     radius = np.broadcast_to(np.asarray(radius, dtype=float), valid.shape)
+    with np.errstate(divide="ignore"):
+        inv_r2 = (1.0 / (radius * radius))[:, None, :]  # (N, 1, K)
     vi = vrel0 + vo[:, None, :]  # (N, K, 2) intruder world velocity
     c, s = np.cos(psi), np.sin(psi)  # (N, C)
     rvx = (c * vo[:, 0:1] - s * vo[:, 1:2])[:, :, None]  # (N, C, 1)
     rvy = (s * vo[:, 0:1] + c * vo[:, 1:2])[:, :, None]
-    vx = vi[:, None, :, 0] - rvx  # (N, C, K)
+    rx, ry = r[:, None, :, 0], r[:, None, :, 1]  # (N, 1, K)
+    r2 = rx * rx + ry * ry
+    # (N, C, K) arrays, updated in place: relative velocity, r·v, |v|², t_cpa, d²
+    vx = vi[:, None, :, 0] - rvx
     vy = vi[:, None, :, 1] - rvy
-    rx = r[:, None, :, 0]
-    ry = r[:, None, :, 1]
-    v2 = vx * vx + vy * vy
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.where(v2 > 0, -(rx * vx + ry * vy) / np.where(v2 > 0, v2, 1.0), 0.0)
-    t = np.clip(t, 0.0, lookahead_s)
-    d = np.hypot(rx + t * vx, ry + t * vy)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = d / radius[:, None, :]
-    ratio = np.where(valid[:, None, :], ratio, np.inf)
-    if ratio.shape[-1] == 0:
-        return np.full(psi.shape, np.inf)
-    return ratio.min(axis=-1)
+    dot = vx * rx
+    dot += vy * ry
+    vx *= vx
+    vy *= vy
+    v2 = vx
+    v2 += vy
+    t = np.negative(dot)
+    t /= np.maximum(v2, 1e-300)  # v = 0 has r·v = 0: t = 0
+    np.clip(t, 0.0, lookahead_s, out=t)
+    # d² = |r + t v|² = r² + t (2 r·v + t |v|²)
+    v2 *= t
+    dot *= 2.0
+    v2 += dot
+    v2 *= t
+    v2 += r2
+    np.maximum(v2, 0.0, out=v2)
+    v2 *= inv_r2
+    np.copyto(v2, np.inf, where=~valid[:, None, :])
+    return np.sqrt(v2.min(axis=-1))
+
+
+@njit(cache=True, error_model="numpy")
+def _cpa_kernel(vo, r, v, valid, psi, radius, lookahead_s):  # pragma: no cover - compiled
+    """Fused loop over ``(n, c, k)`` of :func:`cpa_min_ratio_numpy`'s formula, same operations."""
+    n_own, n_cand = psi.shape
+    n_int = valid.shape[1]
+    out = np.full((n_own, n_cand), np.inf)
+    for n in range(n_own):
+        for c in range(n_cand):
+            if np.isnan(psi[n, c]) and n_int > 0:
+                out[n, c] = np.nan
+                continue
+            cs, sn = np.cos(psi[n, c]), np.sin(psi[n, c])
+            rvx = cs * vo[n, 0] - sn * vo[n, 1]
+            rvy = sn * vo[n, 0] + cs * vo[n, 1]
+            best = np.inf
+            for k in range(n_int):
+                if not valid[n, k]:
+                    continue
+                rx, ry = r[n, k, 0], r[n, k, 1]
+                vx = (v[n, k, 0] + vo[n, 0]) - rvx
+                vy = (v[n, k, 1] + vo[n, 1]) - rvy
+                dot = vx * rx + vy * ry
+                v2 = vx * vx + vy * vy
+                t = -dot / max(v2, 1e-300)
+                t = min(max(t, 0.0), lookahead_s)
+                d2 = (t * v2 + 2.0 * dot) * t + (rx * rx + ry * ry)
+                ratio2 = max(d2, 0.0) * (1.0 / (radius[n, k] * radius[n, k]))
+                best = min(best, ratio2)
+            out[n, c] = np.sqrt(best)
+    return out
 
 
 def candidate_grid(max_heading_change, resolution, extra=None):
@@ -150,6 +212,7 @@ def band_search(
     margin=0.1,
     resolution=DEFAULT_RESOLUTION,
     exact_candidates=True,
+    left_penalty=0.0,
 ):
     """Choose each ownship's heading change against all its intruders at once.
 
@@ -161,6 +224,8 @@ def band_search(
     max_heading_change : (N,) rad, ``|ψ| ≤`` this.
     r_safe : float or (N, K) m; margin : float (clear distance ``r_safe·(1+margin)``).
     lookahead_s : float, s; resolution : grid step, rad; exact_candidates : bool.
+    left_penalty : rad, ≥ 0. Left turns (``ψ > 0``) are ranked as if ``|ψ| + left_penalty``
+        (a rules-of-the-air bias toward right turns; 0 = the plain smallest-``|ψ|`` rule).
 
     Returns
     -------
@@ -177,9 +242,10 @@ def band_search(
     if exact_candidates and r.shape[1] > 0:
         extra = exact_boundary_candidates(vo, r, v, valid, radius, lookahead_s)
     cand = candidate_grid(mx, resolution, extra)
-    # sort by preference: |ψ|, then right turn (ψ ≤ 0) first, then original index
+    # sort by preference: |ψ| (+ left_penalty for left turns), then right turn (ψ ≤ 0)
+    # first, then original index
     usable = ~np.isnan(cand)
-    mag = np.where(usable, np.abs(cand), np.inf)
+    mag = np.where(usable, np.abs(cand) + np.where(cand > 0, left_penalty, 0.0), np.inf)
     idx = np.broadcast_to(np.arange(cand.shape[1]), cand.shape)
     order = np.lexsort((idx, cand > 0, mag), axis=-1)
     cand = np.take_along_axis(cand, order, axis=-1)

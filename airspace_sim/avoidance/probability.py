@@ -105,10 +105,11 @@ def probability_inside_circle(mean, cov, radius):
     qb = k * m_p + m_e
     qc = (m_e * m_e + m_p * m_p) - big_r * big_r
     disc = qb * qb - qa * qc
+    # (no crossing, or a tangent one: split at the line's closest approach to the circle,
+    # the vertex, where the chord probability peaks most sharply)
     root = np.sqrt(np.maximum(disc, 0.0))
-    crosses = disc > 0
-    b1 = np.clip(np.where(crosses, (-qb - root) / qa, d_lo), d_lo, d_hi)
-    b2 = np.clip(np.where(crosses, (-qb + root) / qa, d_lo), d_lo, d_hi)
+    b1 = np.clip((-qb - root) / qa, d_lo, d_hi)
+    b2 = np.clip((-qb + root) / qa, d_lo, d_hi)
     edges = np.stack([d_lo, b1, b2, d_hi], axis=-1)  # (..., 4), non-decreasing
     lo, width = edges[..., :-1], edges[..., 1:] - edges[..., :-1]  # (..., 3)
     # which panel ends need clustered nodes: the switch points, and the window clipped at ±R

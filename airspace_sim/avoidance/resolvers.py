@@ -160,7 +160,8 @@ class BandsResolver:
     """Multi-intruder band search (:func:`~airspace_sim.avoidance.bands.band_search`).
 
     Parameters: ``r_safe`` (m, 3000), ``lookahead_s`` (s, 120), ``margin`` (0.1: clear
-    distance ``r_safe·(1+margin)``), ``resolution`` (rad, 1°), ``exact_candidates`` (True).
+    distance ``r_safe·(1+margin)``), ``resolution`` (rad, 1°), ``exact_candidates`` (True),
+    ``left_penalty`` (rad, 0: left turns rank as ``|ψ| + left_penalty``, a right-turn bias).
     """
 
     def __init__(
@@ -170,9 +171,11 @@ class BandsResolver:
         margin=0.1,
         resolution=DEFAULT_RESOLUTION,
         exact_candidates=True,
+        left_penalty=0.0,
     ):
         self.r_safe, self.lookahead_s, self.margin = float(r_safe), float(lookahead_s), margin
         self.resolution, self.exact_candidates = float(resolution), bool(exact_candidates)
+        self.left_penalty = float(left_penalty)
 
     def _search(self, vo, r, v, valid, mx, r_safe):
         return band_search(
@@ -186,6 +189,7 @@ class BandsResolver:
             self.margin,
             self.resolution,
             self.exact_candidates,
+            self.left_penalty,
         )
 
     def resolve(
