@@ -8,7 +8,13 @@
 
 ``rel_*`` are intruder minus ownship in the world frame (m, m/s). ``heading_change`` is the
 turn the ownship should make now, rad CCW positive (negative = right turn), with
-``|heading_change| ≤ max_heading_change``.
+``|heading_change| ≤ max_heading_change``. ``mode_predictions`` is used by
+``"bands-probabilistic"`` only (format in :class:`ProbabilisticBandsResolver`);
+``rel_covariance`` is accepted for the contract and ignored by the built-in resolvers.
+
+The band resolvers judge a candidate as if the heading change were made at once; a caller
+with a turn-rate limit can pass a wide ``max_heading_change`` (a target-heading search, as
+DAIDALUS does) and turn toward the result at its own rate.
 
 Names:
 
@@ -18,7 +24,9 @@ Names:
   several intruders the one whose predicted conflict comes first (then the nearest) governs.
 - ``"seed-world"``: same detection and governing intruder, but the exact world-frame heading
   change of :func:`tangent_heading_change` (clamped; ``θ`` where the tangent is unreachable).
-- ``"bands"``: the multi-intruder band search of :mod:`airspace_sim.avoidance.bands`.
+- ``"bands"``: the multi-intruder band search of :mod:`airspace_sim.avoidance.bands`
+  (``left_penalty`` > 0, e.g. 10°, biases it toward right turns: on converging rings of 16
+  aircraft that keeps every pair clear where the plain smallest-``|ψ|`` rule does not).
 - ``"bands-probabilistic"``: bands over the intruders whose conflict probability
   (:mod:`airspace_sim.avoidance.probability`, from ``mode_predictions``) reaches
   ``threshold``; falls back to ``"bands"`` without ``mode_predictions``.
