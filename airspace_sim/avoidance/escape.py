@@ -10,15 +10,17 @@ per-step displacement ``Δ = v_rel·ΔT``. The predicted points are ``C_j = B + 
   positive, ``γ = atan2(Δ × BO, Δ · BO)`` exactly as the paper writes it;
 - the relative velocity is rotated *away* from the line of sight, on the side it already
   passes, until it makes the angle ``β`` with ``BO``: then the predicted track from ``B`` is
-  tangent to the safety circle. The rotation is ``θ = −sgn(γ)·(β − |γ|)``, clamped to
-  ``±max_angle``.
+  tangent to the safety circle. The rotation is ``θ = −sgn(γ)·(β − |γ|)`` with
+  ``sgn(0) = +1``, clamped to ``±max_angle``.
 
 Conventions (deliberate, tested in ``tests/test_escape_angle.py``):
 
 - ``θ`` is the CCW-positive rotation of the **relative velocity** in the (non-rotating) frame.
-  The paper writes ``θ = β − γ`` and "rotates the coordinate frame"; read literally that
-  crosses the line of sight when ``γ < 0``. Here the magnitude is always ``β − |γ|`` (the
-  nearer tangent, on the side the track already passes), as ``seed-model.md`` §3 specifies.
+  The paper writes ``θ = β − γ`` and "rotates the coordinate frame"; rotating the frame by
+  ``θ`` rotates vectors in it by ``−θ``, so for ``γ > 0`` the two agree up to that sign. For
+  ``γ < 0`` the paper's formula read literally crosses the line of sight to the far tangent;
+  here the magnitude is always ``β − |γ|`` (the nearer tangent, on the side the track
+  already passes), as ``seed-model.md`` §3 specifies.
 - **Head-on** (``|γ| ≤ HEAD_ON_TOLERANCE``, including exactly ``γ = 0``): the ownship turns
   right, i.e. clockwise. For a static intruder ``v_rel = −v_own``, so rotating the ownship
   velocity by ``ψ`` rotates ``v_rel`` by the same ``ψ``; a right (clockwise) ownship turn is
