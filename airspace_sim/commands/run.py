@@ -401,8 +401,11 @@ def run(args) -> int:
 
     if args.list:
         for name in scenarios.available():
-            sc = scenarios.load(name)
-            print(f"{name:<18} {sc.description}")
+            try:
+                description = scenarios.load(name).description
+            except UserError as exc:  # list the others anyway
+                description = f"(invalid: {exc})"
+            print(f"{name:<18} {description}")
         return 0
     if (args.gif or args.mp4) and not args.render:
         raise UserError(
