@@ -145,6 +145,13 @@ speed = {speed}
             "unknown key",
         ),
         (BASE + "separation = 5\n", "separation", "5", "table"),
+        (BASE + "[resolver]\nsearch_deg = 270\n", "resolver.search_deg", "270", "(0, 180]"),
+        (
+            BASE + "[resolver]\nturn_preference = 'left'\n",
+            "resolver.turn_preference",
+            "'left'",
+            "one of",
+        ),
         (
             BASE + "[[aircraft]]\nid = 'a'\nposition = [0, 0, 0]\nheading_deg = 0\nspeed = 1\n",
             "aircraft[0].position",
