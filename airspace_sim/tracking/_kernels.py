@@ -28,7 +28,7 @@ from numba import njit
 _LOG_2PI = math.log(2.0 * math.pi)
 
 #: Trackers per chunk (SIMD lanes × unroll); a multiple of 8.
-CHUNK = 32
+CHUNK = 64
 
 
 @njit(cache=True, error_model="numpy")
@@ -106,8 +106,8 @@ def _make_imm_step(Mc, nc, mc, W):
     @njit(cache=True, error_model="numpy")
     def imm_step(
         Fr, Fc, Fv, Fnnz, Q, U, Hr, Hc, Hv, R, Pi, gate_d2,
-        z, xm, Pm, mu,
-        xm_o, Pm_o, mu_o, x_o, P_o, nis_o, ll_o, gated_o,
+        z, xs, Ps, mus,
+        xs_o, Ps_o, mus_o, x_o, P_o, mu_o, nis_o, ll_o, gated_o,
     ):  # fmt: skip
         """One IMM cycle (paper §IV, steps 1–5) for every tracker.
 
@@ -116,26 +116,24 @@ def _make_imm_step(Mc, nc, mc, W):
         the non-zeros of H (m, n); R (m, m) symmetric positive definite; Pi (M, M)
         row-stochastic; gate_d2 the chi-square gate on d² (``inf``: no gate).
 
-        In (read only): z (B, m), xm (B, M, n), Pm (B, M, n, n), mu (B, M).
-        Out (written, must not alias the inputs): xm_o, Pm_o, mu_o, x_o (B, n),
-        P_o (B, n, n), nis_o (B,), ll_o (B, M), gated_o (B,) bool.
+        State in (read only), chunked structure-of-arrays, C = ceil(B / W) chunks, lanes
+        past B copies of their chunk's first tracker: xs (C, M, n, W) mode-conditioned
+        states, Ps (C, M, n, n, W) their covariances (upper triangle read), mus (C, M, W)
+        mode probabilities. Measurements z (B, m).
+        Out (written, must not alias the inputs): xs_o, Ps_o, mus_o like the state;
+        x_o (B, n), P_o (B, n, n), mu_o (B, M), nis_o (B,), ll_o (B, M), gated_o (B,) bool.
         """
-        B = xm.shape[0]
-        M = xm.shape[1] if Mc == 0 else Mc
-        n = xm.shape[2] if nc == 0 else nc
+        B = z.shape[0]
+        M = xs.shape[1] if Mc == 0 else Mc
+        n = xs.shape[2] if nc == 0 else nc
         m = z.shape[1] if mc == 0 else mc
         nH = Hr.shape[0]
         half_m_log2pi = 0.5 * m * _LOG_2PI
 
-        mu_c = np.empty((M, W))
         cbar = np.empty((M, W))
         om = np.empty((M, M, W))
-        X = np.empty((M, n, W))
-        Pin = np.empty((M, n, n, W))
         x0 = np.empty((n, W))
         P0 = np.empty((n, n, W))
-        XP = np.empty((M, n, W))
-        PP = np.empty((M, n, n, W))
         FP = np.empty((n, n, W))
         zc = np.empty((m, W))
         have = np.empty(W, dtype=np.bool_)
@@ -159,21 +157,22 @@ def _make_imm_step(Mc, nc, mc, W):
         Sbi = np.empty((m, m, W))
         ldb = np.empty(W)
         nis = np.empty(W)
-        mun = np.empty((M, W))
+        tmp = np.empty(W)
         xc = np.empty((n, W))
         Pc = np.empty((n, n, W))
 
-        for b0 in range(0, B, W):
+        for ch in range((B + W - 1) // W):
+            b0 = ch * W
             nb = min(W, B - b0)
-            # ---- gather the chunk (lanes past the end: copies of the chunk's first tracker)
+            X = xs[ch]
+            Pin = Ps[ch]
+            mu_c = mus[ch]
+            XP = xs_o[ch]
+            PP = Ps_o[ch]
+            mun = mus_o[ch]
+            # ---- measurements of the chunk (lanes past the end: the chunk's first tracker's)
             for w in range(W):
                 b = b0 + w if w < nb else b0
-                for i in range(M):
-                    mu_c[i, w] = mu[b, i]
-                    for k in range(n):
-                        X[i, k, w] = xm[b, i, k]
-                        for l in range(k, n):
-                            Pin[i, k, l, w] = Pm[b, i, k, l]
                 ok = True
                 for a in range(m):
                     zc[a, w] = z[b, a]
@@ -360,20 +359,23 @@ def _make_imm_step(Mc, nc, mc, W):
                         for a2 in range(m):
                             for w in range(W):
                                 K[k, a, w] += PHt[j, k, a2, w] * Si[j, a2, a, w]
+                # (the tracker loop w is innermost everywhere, so that it vectorises)
                 for k in range(n):
                     for w in range(W):
-                        s = 0.0
-                        for a in range(m):
-                            s += K[k, a, w] * nu[j, a, w]
-                        XP[j, k, w] = XP[j, k, w] + s if use[w] else XP[j, k, w]
+                        tmp[w] = 0.0
+                    for a in range(m):
+                        for w in range(W):
+                            tmp[w] += K[k, a, w] * nu[j, a, w]
+                    for w in range(W):
+                        XP[j, k, w] = XP[j, k, w] + tmp[w] if use[w] else XP[j, k, w]
                 # (I − K H) P = P − K (H P), with H P = (P Hᵀ)ᵀ as P is symmetric
                 for k in range(n):
                     for l in range(n):
                         for w in range(W):
-                            s = PP[j, k, l, w]
-                            for a in range(m):
-                                s -= K[k, a, w] * PHt[j, l, a, w]
-                            AP[k, l, w] = s
+                            AP[k, l, w] = PP[j, k, l, w]
+                        for a in range(m):
+                            for w in range(W):
+                                AP[k, l, w] -= K[k, a, w] * PHt[j, l, a, w]
                 # G = K R − ((I − K H) P) Hᵀ; then P = (I − K H) P + G Kᵀ, which is
                 # (I − K H) P (I − K H)ᵀ + K R Kᵀ
                 for k in range(n):
@@ -396,10 +398,12 @@ def _make_imm_step(Mc, nc, mc, W):
                 for k in range(n):
                     for l in range(k, n):
                         for w in range(W):
-                            s = AP[k, l, w]
-                            for a in range(m):
-                                s += G[k, a, w] * K[l, a, w]
-                            PP[j, k, l, w] = s if use[w] else PP[j, k, l, w]
+                            tmp[w] = AP[k, l, w]
+                        for a in range(m):
+                            for w in range(W):
+                                tmp[w] += G[k, a, w] * K[l, a, w]
+                        for w in range(W):
+                            PP[j, k, l, w] = tmp[w] if use[w] else PP[j, k, l, w]
                     for l in range(k):
                         for w in range(W):
                             PP[j, k, l, w] = PP[j, l, k, w]
@@ -451,10 +455,6 @@ def _make_imm_step(Mc, nc, mc, W):
                 for j in range(M):
                     mu_o[b, j] = mun[j, w]
                     ll_o[b, j] = ll[j, w] if have[w] else np.nan
-                    for k in range(n):
-                        xm_o[b, j, k] = XP[j, k, w]
-                        for l in range(n):
-                            Pm_o[b, j, k, l] = PP[j, k, l, w]
                 for k in range(n):
                     x_o[b, k] = xc[k, w]
                     for l in range(n):

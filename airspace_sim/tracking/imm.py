@@ -86,6 +86,24 @@ def _check_psd(a: np.ndarray, name: str, strict: bool) -> None:
         raise UserError(f"IMM {name}: not {kind}{where}: smallest eigenvalue {w[i, 0]!r}")
 
 
+def _pack(a: np.ndarray, W: int) -> np.ndarray:
+    """(B, ...) → chunked structure-of-arrays (C, ..., W), C = ceil(B / W); the lanes past B
+    are copies of the last chunk's first row."""
+    B = a.shape[0]
+    C = -(-B // W)
+    idx = np.arange(C * W)
+    if C:
+        idx[B:] = (C - 1) * W
+    ap = a[idx].reshape((C, W) + a.shape[1:])
+    return np.ascontiguousarray(np.moveaxis(ap, 1, -1))
+
+
+def _unpack(s: np.ndarray, B: int) -> np.ndarray:
+    """Inverse of :func:`_pack`: (C, ..., W) → (B, ...)."""
+    a = np.moveaxis(s, -1, 1).reshape((s.shape[0] * s.shape[-1],) + s.shape[1:-1])
+    return np.ascontiguousarray(a[:B])
+
+
 def _nonzeros(mats: np.ndarray):
     """Row, column, value of the non-zeros of each (k, l) matrix in ``mats`` (G, k, l), padded."""
     G = mats.shape[0]
@@ -206,18 +224,24 @@ class IMM:
 
         x0, P0, mu0 = self._initial(x0, P0, mu0, "")
         B = x0.shape[0]
-        self._xm = np.ascontiguousarray(np.broadcast_to(x0[:, None, :], (B, M, n)))
-        self._Pm = np.ascontiguousarray(np.broadcast_to(P0[:, None], (B, M, n, n)))
-        self._mu = mu0
-        self._x = x0
-        self._P = P0
-        self._nis = np.full(B, np.nan)
-        self._ll = np.full((B, M), np.nan)
-        self._gated = np.zeros(B, dtype=bool)
-        # A combined estimate consistent with filterpy's constructor (Σ μ_j x_j with equal x_j)
-        self._x, self._P = self._combine(self._xm, self._Pm, self._mu)
+        xm = np.ascontiguousarray(np.broadcast_to(x0[:, None, :], (B, M, n)))
+        Pm = np.ascontiguousarray(np.broadcast_to(P0[:, None], (B, M, n, n)))
+        # combined estimate as filterpy's constructor makes it (Σ μ_j x_j with equal x_j)
+        x, P = self._combine(xm, Pm, mu0)
+        self._set_state(xm, Pm, mu0, x, P, np.full(B, np.nan), np.full((B, M), np.nan),
+                        np.zeros(B, dtype=bool))  # fmt: skip
 
     # ------------------------------------------------------------------ helpers
+    def _set_state(self, xm, Pm, mu, x, P, nis, ll, gated):
+        """Store a state given in (B, ...) arrays. The mode-conditioned state lives in the
+        kernel's chunked structure-of-arrays layout; x_modes/P_modes unpack it on demand."""
+        W = _kernels.CHUNK
+        self._B = x.shape[0]
+        self._xs, self._Ps, self._mus = _pack(xm, W), _pack(Pm, W), _pack(mu, W)
+        self._xm_cache, self._Pm_cache = xm, Pm
+        self._mu, self._x, self._P = mu, x, P
+        self._nis, self._ll, self._gated = nis, ll, gated
+
     def _initial(self, x0, P0, mu0, where: str):
         n, M = self.n, self.M
         x0 = _array(x0, f"{where}x0", 2)
@@ -264,7 +288,7 @@ class IMM:
     @property
     def B(self) -> int:
         """Number of trackers."""
-        return self._xm.shape[0]
+        return self._B
 
     @property
     def x(self) -> np.ndarray:
@@ -284,12 +308,16 @@ class IMM:
     @property
     def x_modes(self) -> np.ndarray:
         """Mode-conditioned posterior states (B, M, n) (paper §IV step 3)."""
-        return self._ro(self._xm)
+        if self._xm_cache is None:
+            self._xm_cache = _unpack(self._xs, self._B)
+        return self._ro(self._xm_cache)
 
     @property
     def P_modes(self) -> np.ndarray:
         """Mode-conditioned posterior covariances (B, M, n, n) (paper §IV step 3)."""
-        return self._ro(self._Pm)
+        if self._Pm_cache is None:
+            self._Pm_cache = _unpack(self._Ps, self._B)
+        return self._ro(self._Pm_cache)
 
     @property
     def nis(self) -> np.ndarray:
@@ -316,24 +344,27 @@ class IMM:
             Measurements; a row with any NaN/inf means no measurement (predict only).
         """
         z = np.ascontiguousarray(z, dtype=float)
-        B, M, n = self._xm.shape
+        B, M, n = self._B, self.M, self.n
         if z.shape != (B, self.m):
             raise UserError(f"IMM.step: z must have shape {(B, self.m)}, got {z.shape}")
-        xm = np.empty((B, M, n))
-        Pm = np.empty((B, M, n, n))
-        mu = np.empty((B, M))
+        xs = np.empty_like(self._xs)
+        Ps = np.empty_like(self._Ps)
+        mus = np.empty_like(self._mus)
         x = np.empty((B, n))
         P = np.empty((B, n, n))
+        mu = np.empty((B, M))
         nis = np.empty(B)
         ll = np.empty((B, M))
         gated = np.empty(B, dtype=np.bool_)
         self._kernel(
             self._Fr, self._Fc, self._Fv, self._Fnnz, self._Q, self._U,
             self._Hr, self._Hc, self._Hv, self._R, self._Pi, self.gate_threshold,
-            z, self._xm, self._Pm, self._mu,
-            xm, Pm, mu, x, P, nis, ll, gated,
+            z, self._xs, self._Ps, self._mus,
+            xs, Ps, mus, x, P, mu, nis, ll, gated,
         )  # fmt: skip
-        self._xm, self._Pm, self._mu, self._x, self._P = xm, Pm, mu, x, P
+        self._xs, self._Ps, self._mus = xs, Ps, mus
+        self._xm_cache = self._Pm_cache = None
+        self._mu, self._x, self._P = mu, x, P
         self._nis, self._ll, self._gated = nis, ll, gated
 
     def append(self, x0, P0, mu0) -> np.ndarray:
@@ -344,18 +375,20 @@ class IMM:
         """
         x0, P0, mu0 = self._initial(x0, P0, mu0, "append ")
         k = x0.shape[0]
-        B, M, n = self._xm.shape
+        B, M, n = self._B, self.M, self.n
         xm = np.ascontiguousarray(np.broadcast_to(x0[:, None, :], (k, M, n)))
         Pm = np.ascontiguousarray(np.broadcast_to(P0[:, None], (k, M, n, n)))
         x, P = self._combine(xm, Pm, mu0)
-        self._xm = np.concatenate([self._xm, xm])
-        self._Pm = np.concatenate([self._Pm, Pm])
-        self._mu = np.concatenate([self._mu, mu0])
-        self._x = np.concatenate([self._x, x])
-        self._P = np.concatenate([self._P, P])
-        self._nis = np.concatenate([self._nis, np.full(k, np.nan)])
-        self._ll = np.concatenate([self._ll, np.full((k, M), np.nan)])
-        self._gated = np.concatenate([self._gated, np.zeros(k, dtype=bool)])
+        self._set_state(
+            np.concatenate([self.x_modes, xm]),
+            np.concatenate([self.P_modes, Pm]),
+            np.concatenate([self._mu, mu0]),
+            np.concatenate([self._x, x]),
+            np.concatenate([self._P, P]),
+            np.concatenate([self._nis, np.full(k, np.nan)]),
+            np.concatenate([self._ll, np.full((k, M), np.nan)]),
+            np.concatenate([self._gated, np.zeros(k, dtype=bool)]),
+        )
         return np.arange(B, B + k)
 
     def remove(self, indices) -> None:
@@ -378,8 +411,9 @@ class IMM:
             raise UserError(f"IMM.remove: index out of range for {B} trackers: {idx.tolist()}")
         keep = np.ones(B, dtype=bool)
         keep[idx] = False
-        for name in ("_xm", "_Pm", "_mu", "_x", "_P", "_nis", "_ll", "_gated"):
-            setattr(self, name, np.ascontiguousarray(getattr(self, name)[keep]))
+        self._set_state(*(np.ascontiguousarray(a[keep]) for a in (
+            self.x_modes, self.P_modes, self._mu, self._x, self._P, self._nis, self._ll, self._gated
+        )))  # fmt: skip
 
     def predict_modes(self, steps: int):
         """Each mode's own model propagated 1..steps steps ahead, without mixing.
@@ -394,10 +428,11 @@ class IMM:
         if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 0:
             raise UserError(f"IMM.predict_modes: steps must be a non-negative integer, got {steps!r}")
         steps = int(steps)
-        B, M, n = self._xm.shape
+        B, M, n = self._B, self.M, self.n
         xs = np.empty((B, M, steps, n))
         Ps = np.empty((B, M, steps, n, n))
-        _kernels.predict_modes(self._F, self._Q, self._U, self._xm, self._Pm, steps, xs, Ps)
+        _kernels.predict_modes(self._F, self._Q, self._U, np.asarray(self.x_modes),
+                               np.asarray(self.P_modes), steps, xs, Ps)  # fmt: skip
         return xs, Ps
 
     def __repr__(self) -> str:
