@@ -124,21 +124,22 @@ def random_sector(scenario: Scenario, rng: np.random.Generator) -> list[Aircraft
     """Uniform in a square sector, initially separated by more than r_safe, routes across it."""
     t = scenario.traffic
     side, r_safe = t.sector, scenario.separation.r_safe
-    placed = [np.asarray(a.position, float) for a in scenario.aircraft]
+    hand = np.array([a.position for a in scenario.aircraft], dtype=float).reshape(-1, 2)
+    placed = np.empty((hand.shape[0] + t.count, 2))
+    placed[: hand.shape[0]] = hand
+    m = hand.shape[0]
     speeds = _speeds(scenario, rng)
     out = []
     for i, aid in enumerate(_ids("ac", t.count)):
-        for _ in range(MAX_TRIES):
-            p = rng.uniform(-side / 2, side / 2, size=2)
-            if all(np.hypot(*(p - q)) > r_safe for q in placed):
-                break
-        else:
+        p = _place(rng, placed[:m], side, r_safe)
+        if p is None:
             raise UserError(
                 f"{scenario.source}: traffic.count: cannot place {t.count} aircraft more than "
                 f"r_safe = {r_safe:g} m apart in a {side:g} m sector (placed {i}); "
                 f"use a larger traffic.sector or fewer aircraft, got {t.count}"
             )
-        placed.append(p)
+        placed[m] = p
+        m += 1
         for _ in range(MAX_TRIES):
             dest = np.asarray(_edge_point(rng.uniform(0, 4 * side), side))
             if np.hypot(*(dest - p)) >= side / 2:
@@ -146,6 +147,20 @@ def random_sector(scenario: Scenario, rng: np.random.Generator) -> list[Aircraft
         heading = math.atan2(dest[1] - p[1], dest[0] - p[0])
         out.append(_spec(scenario, aid, p, heading, speeds[i], [tuple(dest)]))
     return out
+
+
+def _place(rng, placed: np.ndarray, side: float, r_safe: float, batch: int = 64):
+    """Rejection sampling, vectorised: the first of i.i.d. uniform candidates (drawn
+    ``batch`` at a time) farther than r_safe from every placed point; None after MAX_TRIES."""
+    for _ in range(0, MAX_TRIES, batch):
+        cand = rng.uniform(-side / 2, side / 2, size=(batch, 2))
+        if placed.shape[0] == 0:
+            return cand[0]
+        d2 = ((cand[:, None, :] - placed[None, :, :]) ** 2).sum(axis=-1).min(axis=1)
+        ok = np.flatnonzero(d2 > r_safe**2)
+        if ok.size:
+            return cand[ok[0]]
+    return None
 
 
 def miss_distance(rel_pos: np.ndarray, rel_vel: np.ndarray) -> tuple[float, float]:
