@@ -454,3 +454,23 @@ def test_periodic_checkpoint_resumes_the_rest_of_the_run(tmp_path, monkeypatch, 
     whole = _run_json(capsys, tmp_path / "whole.json", "head_on", "--steps", "9")
     assert rest["steps"] == 5 and rest["total_steps"] == 9
     assert rest["metrics"] == whole["metrics"]
+
+
+class _PicklableWorld:
+    """Stands in for a World that can be pickled (the real one holds pymunk cffi handles)."""
+
+    def __init__(self):
+        self.step_count = 3
+        self.state = [1.0, 2.0]
+
+
+def test_checkpoint_pickles_a_picklable_world(tmp_path):
+    from airspace_sim.commands.run import load_checkpoint, save_checkpoint
+    from airspace_sim.scenarios import load
+
+    meta = {"scenario": "head_on", "source": "x", "seed": 0, "overrides": [], "total_steps": 9}
+    how = save_checkpoint(tmp_path / "c.pkl", _PicklableWorld(), load("head_on"), meta)
+    assert how == "pickle"
+    world, meta2 = load_checkpoint(tmp_path / "c.pkl")
+    assert isinstance(world, _PicklableWorld) and world.state == [1.0, 2.0] and meta2 == meta
+    assert not (tmp_path / "c.pkl.tmp").exists()
