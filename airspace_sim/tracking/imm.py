@@ -238,6 +238,8 @@ class IMM:
         W = _kernels.CHUNK
         self._B = x.shape[0]
         self._xs, self._Ps, self._mus = _pack(xm, W), _pack(Pm, W), _pack(mu, W)
+        # the kernel's output buffers for the next step (internal, so reused: ping-pong)
+        self._spare = (np.empty_like(self._xs), np.empty_like(self._Ps), np.empty_like(self._mus))
         self._xm_cache, self._Pm_cache = xm, Pm
         self._mu, self._x, self._P = mu, x, P
         self._nis, self._ll, self._gated = nis, ll, gated
@@ -347,9 +349,7 @@ class IMM:
         B, M, n = self._B, self.M, self.n
         if z.shape != (B, self.m):
             raise UserError(f"IMM.step: z must have shape {(B, self.m)}, got {z.shape}")
-        xs = np.empty_like(self._xs)
-        Ps = np.empty_like(self._Ps)
-        mus = np.empty_like(self._mus)
+        xs, Ps, mus = self._spare
         x = np.empty((B, n))
         P = np.empty((B, n, n))
         mu = np.empty((B, M))
@@ -362,6 +362,7 @@ class IMM:
             z, self._xs, self._Ps, self._mus,
             xs, Ps, mus, x, P, mu, nis, ll, gated,
         )  # fmt: skip
+        self._spare = (self._xs, self._Ps, self._mus)
         self._xs, self._Ps, self._mus = xs, Ps, mus
         self._xm_cache = self._Pm_cache = None
         self._mu, self._x, self._P = mu, x, P
