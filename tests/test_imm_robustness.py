@@ -245,6 +245,20 @@ def test_no_gate_outlier_stays_finite():
     assert np.all(np.isfinite(imm.log_likelihood)) and np.all(imm.log_likelihood < -1e3)
 
 
+def test_overflowing_measurement_is_gated_even_without_gate():
+    """z = 1e200 overflows d² to inf: no mode explains it, so it is gated, never NaN."""
+    rng = np.random.default_rng(10)
+    B = 5
+    pre, args, x0, P0 = seed_setup(B, rng)
+    imm = IMM(x0=x0, P0=P0, mu0=pre.mu0(), gate_probability=1.0, **args)
+    imm.step(x0[:, [0, 2]] + 0.1 * x0[:, [1, 3]])
+    mu = np.array(imm.mu)
+    imm.step(np.full((B, 2), 1e200))
+    assert imm.gated.all()
+    assert np.all(np.isfinite(imm.x)) and np.all(np.isfinite(imm.P)) and np.all(np.isfinite(imm.mu))
+    np.testing.assert_allclose(imm.mu, mu @ args["transition_matrix"], rtol=1e-12)
+
+
 def test_unreachable_mode_stays_at_zero():
     """A mode with c̄_j = 0 (μ0 = 0 and no way in) keeps μ_j = 0, without NaN (filterpy: 0/0)."""
     rng = np.random.default_rng(9)

@@ -309,6 +309,10 @@ def _make_imm_step(Mc, nc, mc, W):
                         for w in range(W):
                             d2[j, w] += nu[j, a, w] * Si[j, a, a2, w] * nu[j, a2, w]
                 for w in range(W):
+                    # S_j not positive definite (NaN log det) or d² overflowing: the mode
+                    # explains nothing (NaN d² fails every comparison below)
+                    ok = logdet[j, w] == logdet[j, w] and d2[j, w] < np.inf
+                    d2[j, w] = d2[j, w] if ok else np.nan
                     ll[j, w] = -0.5 * (d2[j, w] + logdet[j, w]) - half_m_log2pi
 
             # ---- gate: the measurement is used unless no reachable mode explains it
@@ -425,7 +429,8 @@ def _make_imm_step(Mc, nc, mc, W):
                     s = 0.0
                     for j in range(M):
                         c = cbar[j, w]
-                        e = c * math.exp(ll[j, w] - mx) if c > 0.0 else 0.0
+                        # a mode with a NaN likelihood (see above) gets no weight
+                        e = c * math.exp(ll[j, w] - mx) if (c > 0.0 and ll[j, w] > -np.inf) else 0.0
                         mun[j, w] = e
                         s += e
                     for j in range(M):

@@ -23,8 +23,16 @@ predicted only (steps 1–3a), its mode probabilities become ``c̄``. A measurem
 mode explains — every reachable mode's Mahalanobis distance ``d²_j = ν_jᵀ S_j⁻¹ ν_j``
 exceeds the chi-square quantile of ``gate_probability`` for ``m`` degrees of freedom — is
 treated the same way and flagged in :attr:`IMM.gated`: an outlier neither produces NaN nor
-erases the mode probabilities. Within the gate the result is the textbook IMM, equal to
-``filterpy.kalman.IMMEstimator`` to rounding.
+erases the mode probabilities (they become ``c̄``, the prediction of the evidence so far).
+A mode whose ``d²`` is not finite (e.g. ``z = 1e200``) explains nothing, even with the gate
+disabled. Within the gate the result is the textbook IMM, equal to
+``filterpy.kalman.IMMEstimator`` to rounding (tests/test_imm_filterpy.py).
+
+Mode probabilities are computed as ``μ_j = c̄_j exp(ℓ_j − max ℓ) / Σ_l c̄_l exp(ℓ_l − max ℓ)``
+with ``ℓ_j = log Λ_j``: the log-sum-exp normalisation, so that no likelihood underflows to
+zero unless it is negligible against the best mode's (filterpy instead floors ``Λ_j`` at
+``sys.float_info.min``, after which μ silently equals c̄). A mode that cannot be reached
+(``c̄_j = 0``) keeps its own estimate in the mixing step and keeps ``μ_j = 0``.
 
 Units are whatever the model uses; in this project SI (m, m/s, rad/s), state
 ``[x, vx, y, vy, Ω]``.
@@ -157,7 +165,8 @@ class IMM:
         there was no measurement, computed (typically large) where it was gated.
     log_likelihood (B, M)
         Last step's ``log N(z; ẑ_j, S_j)`` per mode; NaN where there was no measurement,
-        computed (but not used) where the measurement was gated.
+        computed (but not used) where the measurement was gated, NaN for a mode whose
+        ``d²`` is not finite.
     gated (B,) bool
         Last step's measurement was finite but outside every mode's gate (predict only).
     """
