@@ -163,6 +163,7 @@ def _make_imm_step(Mc, nc, mc, W):
         ldb = np.empty(W)
         nis = np.empty(W)
         tmp = np.empty(W)
+        D = np.empty((n, W))
         xc = np.empty((n, W))
         Pc = np.empty((n, n, W))
 
@@ -216,11 +217,12 @@ def _make_imm_step(Mc, nc, mc, W):
                             P0[k, l, w] = 0.0
                 for i in range(M):
                     for k in range(n):
+                        for w in range(W):
+                            D[k, w] = X[i, k, w] - x0[k, w]
+                    for k in range(n):
                         for l in range(k, n):
                             for w in range(W):
-                                P0[k, l, w] += om[i, j, w] * (
-                                    (X[i, k, w] - x0[k, w]) * (X[i, l, w] - x0[l, w]) + Pin[i, k, l, w]
-                                )
+                                P0[k, l, w] += om[i, j, w] * (D[k, w] * D[l, w] + Pin[i, k, l, w])
                 for k in range(n):
                     for l in range(k):
                         for w in range(W):
@@ -452,11 +454,12 @@ def _make_imm_step(Mc, nc, mc, W):
                         Pc[k, l, w] = 0.0
             for j in range(M):
                 for k in range(n):
+                    for w in range(W):
+                        D[k, w] = XP[j, k, w] - xc[k, w]
+                for k in range(n):
                     for l in range(k, n):
                         for w in range(W):
-                            Pc[k, l, w] += mun[j, w] * (
-                                (XP[j, k, w] - xc[k, w]) * (XP[j, l, w] - xc[l, w]) + PP[j, k, l, w]
-                            )
+                            Pc[k, l, w] += mun[j, w] * (D[k, w] * D[l, w] + PP[j, k, l, w])
 
             # ---- scatter the chunk
             for w in range(nb):
