@@ -61,6 +61,8 @@ class ResolverSpec:
     #: extra fraction of r_safe (on top of margin) that a turn back toward the route must
     #: keep clear over the look-ahead
     resume_margin: float = 0.2
+    #: seconds the committed turn side is remembered after a conflict ends
+    side_memory_s: float = 30.0
 
 
 @dataclass
