@@ -128,7 +128,8 @@ class Avoidance:
     conflict episode (until the ownship is clear): ``"right"`` takes the nearest clear
     heading on the right if there is one within the search range (else on the left),
     ``"nearest"`` the resolver's choice; afterwards the committed side is kept while it has
-    a clear heading. Without commitment (``"none"``), or for resolvers that return no band,
+    a clear heading, and remembered for ``side_memory_s`` after the conflict ends (so a
+    conflict flag flickering on noisy tracks does not flip the side). Without commitment (``"none"``), or for resolvers that return no band,
     the resolver's advice is used as is. Only tracks older than ``confirm_s`` are used.
     """
 
@@ -152,6 +153,8 @@ class Avoidance:
             raise UserError(f"{scenario.source}: resolver.search_deg: expected 0..180 degrees, "
                             f"got {spec.search_deg!r}")
         self.preference = spec.turn_preference
+        self.memory_steps = int(math.ceil(float(spec.side_memory_s) / dt - 1e-9))
+        self._clear_for = None  # steps each aircraft has been clear of conflict
         #: whether advice overrides the autopilot ("none" only reports conflicts)
         self.overrides = self.kind != "none"
 
@@ -186,7 +189,11 @@ class Avoidance:
             advice[enc.owners] = np.clip(psi, -mx, mx)
             conflict[enc.owners] = c
         if side is not None:
-            side[~conflict] = 0.0
+            # forget the committed side once clear for side_memory_s
+            if self._clear_for is None or self._clear_for.shape != (n,):
+                self._clear_for = np.zeros(n, dtype=np.int64)
+            self._clear_for = np.where(conflict, 0, self._clear_for + 1)
+            side[self._clear_for >= max(self.memory_steps, 1)] = 0.0
         return advice, conflict
 
     def _commit(self, psi, conflict, side, cand, band):
@@ -214,7 +221,7 @@ class Avoidance:
         has_s, pick_s = first_clear(cand * side[:, None] >= 0)
         psi = np.where(kept & has_s, pick_s, psi)
         new_side = np.where(kept & ~has_s, np.sign(psi), new_side)
-        return psi, np.where(conflict, new_side, 0.0)
+        return psi, np.where(conflict, new_side, side)
 
     def resume_clear(self, enc: Encounters, velocities, turn, max_heading_change) -> np.ndarray:
         """For the ownships of ``enc``: is the heading change ``turn`` (n_own,) clear?"""
