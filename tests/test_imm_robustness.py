@@ -28,7 +28,7 @@ class ReferenceIMM:
         self.Pi = np.asarray(transition_matrix)
         M, n, _ = self.F.shape
         self.U = np.zeros((M, n)) if offsets is None else np.asarray(offsets)
-        self.gate = np.inf if gate_probability == 1 else chi2.ppf(gate_probability, self.H.shape[0])
+        self.gate = np.inf if gate_probability == 1 else chi2.isf(1 - gate_probability, self.H.shape[0])
         B = len(x0)
         self.xm = np.repeat(np.asarray(x0, float)[:, None], M, axis=1)
         self.Pm = np.repeat(np.broadcast_to(P0, (B, n, n))[:, None], M, axis=1).astype(float)

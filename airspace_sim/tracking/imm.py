@@ -216,9 +216,9 @@ class IMM:
         if p == 1.0:
             gate_d2 = np.inf
         else:
-            from scipy.stats import chi2
+            from scipy.special import chdtri  # lighter to import than scipy.stats
 
-            gate_d2 = float(chi2.ppf(p, m))
+            gate_d2 = float(chdtri(m, 1.0 - p))  # chi-square quantile: Pr(d² > gate) = 1 − p
 
         self._F, self._Q, self._U, self._H, self._R, self._Pi = F, Q, U, H, R, Pi
         self._Fr, self._Fc, self._Fv, self._Fnnz = _nonzeros(F)
