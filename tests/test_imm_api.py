@@ -58,7 +58,7 @@ def assert_same_bits(a: dict, b: dict):
 # ---------------------------------------------------------------- shapes and views
 def test_shapes_and_defaults():
     rng = np.random.default_rng(0)
-    pre, args = seed_model()
+    _, args = seed_model()
     B = 7
     x0, P0, mu0 = initial(rng, B)
     imm = IMM(x0=x0, P0=P0, mu0=mu0, **args)
@@ -92,7 +92,7 @@ def test_broadcast_P0_mu0_equal_explicit():
 
 def test_views_are_read_only_and_not_mutated_by_step():
     rng = np.random.default_rng(2)
-    pre, args = seed_model()
+    _, args = seed_model()
     x0, P0, mu0 = initial(rng, 3)
     imm = IMM(x0=x0, P0=P0, mu0=mu0, **args)
     z = measurements(rng, x0, 2, missing=0, outliers=0)
@@ -109,7 +109,7 @@ def test_views_are_read_only_and_not_mutated_by_step():
 
 def test_missing_row_gives_nan_nis_and_loglik():
     rng = np.random.default_rng(3)
-    pre, args = seed_model()
+    _, args = seed_model()
     x0, P0, mu0 = initial(rng, 4)
     imm = IMM(x0=x0, P0=P0, mu0=mu0, **args)
     z = measurements(rng, x0, 1, missing=0, outliers=0)[0]
@@ -193,7 +193,7 @@ def test_method_validation():
 # ---------------------------------------------------------------- append / remove
 def test_append_remove_keep_others_bit_for_bit():
     rng = np.random.default_rng(4)
-    pre, args = seed_model()
+    _, args = seed_model()
     B, T = 40, 60
     x0, P0, mu0 = initial(rng, B)
     z = measurements(rng, x0, T)
@@ -221,7 +221,9 @@ def test_append_remove_keep_others_bit_for_bit():
             mask[[1, 5, -1]] = True
             imm.remove(mask)
             orig = orig[~mask]
-        zk = np.where(orig[:, None] >= 0, z[k][np.maximum(orig, 0)], za[k][np.maximum(-1 - orig, 0)])
+        zk = np.where(
+            orig[:, None] >= 0, z[k][np.maximum(orig, 0)], za[k][np.maximum(-1 - orig, 0)]
+        )
         imm.step(zk)
         kept = np.flatnonzero(orig >= 0)
         assert_same_bits(snapshot(imm, kept), {n: v[orig[kept]] for n, v in ref_hist[k].items()})
@@ -231,7 +233,7 @@ def test_append_remove_keep_others_bit_for_bit():
 # ---------------------------------------------------------------- determinism
 def test_same_inputs_same_bits():
     rng = np.random.default_rng(5)
-    pre, args = seed_model()
+    _, args = seed_model()
     x0, P0, mu0 = initial(rng, 100)
     z = measurements(rng, x0, 30)
     runs = []
@@ -246,14 +248,16 @@ def test_same_inputs_same_bits():
 def test_result_independent_of_batch_composition():
     """Tracker b gives the same bits alone, in its batch, or in a shuffled, larger batch."""
     rng = np.random.default_rng(6)
-    pre, args = seed_model()
+    _, args = seed_model()
     B, T = 70, 25  # > one SIMD chunk, with a partial last chunk
     x0, P0, mu0 = initial(rng, B)
     z = measurements(rng, x0, T)
     together = IMM(x0=x0, P0=P0, mu0=mu0, **args)
     perm = rng.permutation(B)
     shuffled = IMM(x0=x0[perm], P0=P0[perm], mu0=mu0[perm], **args)
-    singles = [IMM(x0=x0[b : b + 1], P0=P0[b : b + 1], mu0=mu0[b : b + 1], **args) for b in range(B)]
+    singles = [
+        IMM(x0=x0[b : b + 1], P0=P0[b : b + 1], mu0=mu0[b : b + 1], **args) for b in range(B)
+    ]
     for k in range(T):
         together.step(z[k])
         shuffled.step(z[k][perm])
@@ -270,7 +274,7 @@ def test_result_independent_of_batch_composition():
 # ---------------------------------------------------------------- predict_modes
 def test_predict_modes_matches_repeated_multiplication():
     rng = np.random.default_rng(7)
-    pre, args = seed_model()
+    _, args = seed_model()
     x0, P0, mu0 = initial(rng, 6)
     imm = IMM(x0=x0, P0=P0, mu0=mu0, **args)
     z = measurements(rng, x0, 5, missing=0, outliers=0)

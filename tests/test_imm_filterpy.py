@@ -88,7 +88,9 @@ def run_case(args, z, x0, P0, mu0, check_rows, full_steps=0):
     T, B, _ = z.shape
     imm = IMM(x0=x0, P0=P0, mu0=mu0, **args)
     fp_all = [filterpy_imm(args, x0[b], P0[b], mu0[b]) for b in range(B)] if full_steps else []
-    fp = {b: (fp_all[b] if fp_all else filterpy_imm(args, x0[b], P0[b], mu0[b])) for b in check_rows}
+    fp = {
+        b: (fp_all[b] if fp_all else filterpy_imm(args, x0[b], P0[b], mu0[b])) for b in check_rows
+    }
     rows = np.asarray(check_rows)
     for k in range(T):
         imm.step(z[k])
@@ -162,7 +164,9 @@ def random_model(rng, M: int, n: int, m: int):
 
 def simulate_model(rng, args, T: int, x0: np.ndarray) -> np.ndarray:
     """Measurements (T, B, m) of a Markov-switching truth of the given model."""
-    F, Q, H, R = (args[k] for k in ("transitions", "process_noise", "measurement_matrix", "measurement_noise"))
+    F, Q, H, R = (
+        args[k] for k in ("transitions", "process_noise", "measurement_matrix", "measurement_noise")
+    )
     Pi, U = args["transition_matrix"], args["offsets"]
     B, n = x0.shape
     M = F.shape[0]
@@ -173,7 +177,11 @@ def simulate_model(rng, args, T: int, x0: np.ndarray) -> np.ndarray:
     LR = np.linalg.cholesky(R)
     for _ in range(T):
         q = np.array([rng.choice(M, p=Pi[i]) for i in q])
-        x = np.einsum("bij,bj->bi", F[q], x) + U[q] + np.einsum("bij,bj->bi", LQ[q], rng.standard_normal((B, n)))
+        x = (
+            np.einsum("bij,bj->bi", F[q], x)
+            + U[q]
+            + np.einsum("bij,bj->bi", LQ[q], rng.standard_normal((B, n)))
+        )
         zs.append(x @ H.T + rng.standard_normal((B, H.shape[0])) @ LR.T)
     return np.array(zs)
 

@@ -9,7 +9,6 @@ which also covers per-mode offsets.
 from __future__ import annotations
 
 import numpy as np
-import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.stats import chi2
@@ -28,7 +27,9 @@ class ReferenceIMM:
         self.Pi = np.asarray(transition_matrix)
         M, n, _ = self.F.shape
         self.U = np.zeros((M, n)) if offsets is None else np.asarray(offsets)
-        self.gate = np.inf if gate_probability == 1 else chi2.isf(1 - gate_probability, self.H.shape[0])
+        self.gate = (
+            np.inf if gate_probability == 1 else chi2.isf(1 - gate_probability, self.H.shape[0])
+        )
         B = len(x0)
         self.xm = np.repeat(np.asarray(x0, float)[:, None], M, axis=1)
         self.Pm = np.repeat(np.broadcast_to(P0, (B, n, n))[:, None], M, axis=1).astype(float)
@@ -49,7 +50,10 @@ class ReferenceIMM:
                 else:
                     w = np.eye(M)[j]
                 x0 = w @ self.xm[b]
-                P0 = sum(w[i] * (self.Pm[b, i] + np.outer(self.xm[b, i] - x0, self.xm[b, i] - x0)) for i in range(M))
+                P0 = sum(
+                    w[i] * (self.Pm[b, i] + np.outer(self.xm[b, i] - x0, self.xm[b, i] - x0))
+                    for i in range(M)
+                )
                 x = F[j] @ x0 + U[j]
                 P = F[j] @ P0 @ F[j].T + Q[j]
                 xs.append(x)
@@ -71,7 +75,9 @@ class ReferenceIMM:
             gated = have and all(d2s[j] > self.gate for j in range(M) if cbar[j] > 0)
             if have:
                 zbar = sum(cbar[j] * zhs[j] for j in range(M))
-                Sbar = sum(cbar[j] * (Ss[j] + np.outer(zhs[j] - zbar, zhs[j] - zbar)) for j in range(M))
+                Sbar = sum(
+                    cbar[j] * (Ss[j] + np.outer(zhs[j] - zbar, zhs[j] - zbar)) for j in range(M)
+                )
                 nis = (z[b] - zbar) @ np.linalg.solve(Sbar, z[b] - zbar)
                 ll = np.array(lls)
             else:
@@ -136,7 +142,7 @@ def test_missing_outliers_offsets_match_reference():
     """NaN / inf rows are predict-only, outliers are gated, offsets are applied: as the reference."""
     rng = np.random.default_rng(5)
     B, T = 12, 150
-    pre, args, x0, P0 = seed_setup(B, rng)
+    _, args, x0, P0 = seed_setup(B, rng)
     mu0 = rng.dirichlet(np.ones(3), B)
     imm = IMM(x0=x0, P0=P0, mu0=mu0, **args)
     ref = ReferenceIMM(x0=x0, P0=P0, mu0=mu0, **args)
@@ -262,7 +268,7 @@ def test_overflowing_measurement_is_gated_even_without_gate():
 def test_unreachable_mode_stays_at_zero():
     """A mode with c̄_j = 0 (μ0 = 0 and no way in) keeps μ_j = 0, without NaN (filterpy: 0/0)."""
     rng = np.random.default_rng(9)
-    pre, args, x0, P0 = seed_setup(4, rng)
+    _, args, x0, P0 = seed_setup(4, rng)
     args["transition_matrix"] = np.array([[0.9, 0.1, 0.0], [0.2, 0.8, 0.0], [0.3, 0.3, 0.4]])
     imm = IMM(x0=x0, P0=P0, mu0=[0.5, 0.5, 0.0], **args)
     for k in range(30):

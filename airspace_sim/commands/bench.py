@@ -7,7 +7,12 @@ HELP = "Benchmark the batched IMM against filterpy's IMMEstimator (tracker-updat
 
 def add_arguments(parser) -> None:
     parser.add_argument("--steps", type=int, default=20, help="IMM steps per timing (default 20)")
-    parser.add_argument("--repeats", type=int, default=5, help="timings per batch size; the median is reported (default 5)")
+    parser.add_argument(
+        "--repeats",
+        type=int,
+        default=5,
+        help="timings per batch size; the median is reported (default 5)",
+    )
     parser.add_argument(
         "--sizes", default="1,100,10000", help="comma-separated batch sizes B (default 1,100,10000)"
     )
@@ -16,7 +21,9 @@ def add_arguments(parser) -> None:
         help="single-tracker filterpy updates to time, split over the repeats (default 300)",
     )  # fmt: skip
     parser.add_argument("--preset", default="seed", help="model preset (default seed)")
-    parser.add_argument("--json", metavar="PATH", default=None, help="also write the results as JSON to PATH")
+    parser.add_argument(
+        "--json", metavar="PATH", default=None, help="also write the results as JSON to PATH"
+    )
 
 
 def run(args) -> int:

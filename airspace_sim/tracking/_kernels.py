@@ -344,7 +344,8 @@ def _make_imm_step(Mc, nc, mc, W):
                     for a2 in range(a, m):
                         for w in range(W):
                             Sbar[a, a2, w] += cbar[j, w] * (
-                                S[j, a, a2, w] + (zh[j, a, w] - zbar[a, w]) * (zh[j, a2, w] - zbar[a2, w])
+                                S[j, a, a2, w]
+                                + (zh[j, a, w] - zbar[a, w]) * (zh[j, a2, w] - zbar[a2, w])
                             )
             for a in range(m):
                 for a2 in range(a):

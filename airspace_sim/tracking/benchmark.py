@@ -153,11 +153,14 @@ def run_benchmark(
 
 def format_table(result: dict) -> str:
     """The result of :func:`run_benchmark` as a plain-text table."""
+
     def g(v):
         return "n/a" if v is None else f"{v:.3g}"
 
     head = ("B", "ours updates/s", "filterpy updates/s", "ratio", "ours (CPU)", "filterpy (CPU)")
-    lines = [f"{head[0]:>8}  {head[1]:>15}  {head[2]:>19}  {head[3]:>7}  {head[4]:>11}  {head[5]:>15}"]
+    lines = [
+        f"{head[0]:>8}  {head[1]:>15}  {head[2]:>19}  {head[3]:>7}  {head[4]:>11}  {head[5]:>15}"
+    ]
     for r in result["rows"]:
         ratio = "n/a" if r["ratio"] is None else f"{r['ratio']:.0f}x"
         lines.append(

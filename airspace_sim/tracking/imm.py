@@ -59,7 +59,9 @@ def _array(value, name: str, ndim: int | tuple, shape=None) -> np.ndarray:
         raise UserError(f"IMM {name}: not a numeric array ({exc})") from None
     dims = (ndim,) if isinstance(ndim, int) else ndim
     if a.ndim not in dims:
-        raise UserError(f"IMM {name}: expected {' or '.join(f'{d}-d' for d in dims)} array, got shape {a.shape}")
+        raise UserError(
+            f"IMM {name}: expected {' or '.join(f'{d}-d' for d in dims)} array, got shape {a.shape}"
+        )
     if shape is not None and a.shape != tuple(shape):
         raise UserError(f"IMM {name}: expected shape {tuple(shape)}, got {a.shape}")
     if not np.all(np.isfinite(a)):
@@ -75,7 +77,9 @@ def _check_symmetric(a: np.ndarray, name: str) -> np.ndarray:
     bad = np.abs(a - at) > 1e-9 * scale
     if np.any(bad):
         idx = tuple(int(i) for i in np.argwhere(bad)[0])
-        raise UserError(f"IMM {name}: not symmetric (entry {list(idx)} = {a[idx]!r} differs from its transpose)")
+        raise UserError(
+            f"IMM {name}: not symmetric (entry {list(idx)} = {a[idx]!r} differs from its transpose)"
+        )
     return np.ascontiguousarray(0.5 * (a + at))
 
 
@@ -192,7 +196,9 @@ class IMM:
         if Q.shape == (n, n):
             Q = np.broadcast_to(Q, (M, n, n)).copy()
         if Q.shape != (M, n, n):
-            raise UserError(f"IMM process_noise: expected shape {(M, n, n)} (like transitions), got {Q.shape}")
+            raise UserError(
+                f"IMM process_noise: expected shape {(M, n, n)} (like transitions), got {Q.shape}"
+            )
         Q = _check_symmetric(Q, "process_noise")
         _check_psd(Q, "process_noise", strict=False)
         H = _array(measurement_matrix, "measurement_matrix", 2)
@@ -204,13 +210,17 @@ class IMM:
         _check_psd(R, "measurement_noise", strict=True)
         Pi = validate_transition_matrix(transition_matrix, name="IMM transition_matrix")
         if Pi.shape != (M, M):
-            raise UserError(f"IMM transition_matrix: expected shape {(M, M)} for {M} modes, got {Pi.shape}")
+            raise UserError(
+                f"IMM transition_matrix: expected shape {(M, M)} for {M} modes, got {Pi.shape}"
+            )
         Pi = np.ascontiguousarray(Pi / Pi.sum(axis=1, keepdims=True))
         U = np.zeros((M, n)) if offsets is None else _array(offsets, "offsets", 2, (M, n))
         try:
             p = float(gate_probability)
         except (TypeError, ValueError):
-            raise UserError(f"IMM gate_probability: must be a number in (0, 1], got {gate_probability!r}") from None
+            raise UserError(
+                f"IMM gate_probability: must be a number in (0, 1], got {gate_probability!r}"
+            ) from None
         if not (0.0 < p <= 1.0):
             raise UserError(f"IMM gate_probability: must be in (0, 1], got {gate_probability!r}")
         if p == 1.0:
@@ -263,7 +273,9 @@ class IMM:
         if P0.shape == (n, n):
             P0 = np.broadcast_to(P0, (B, n, n)).copy()
         if P0.shape != (B, n, n):
-            raise UserError(f"IMM {where}P0: expected shape {(B, n, n)} or {(n, n)}, got {P0.shape}")
+            raise UserError(
+                f"IMM {where}P0: expected shape {(B, n, n)} or {(n, n)}, got {P0.shape}"
+            )
         P0 = _check_symmetric(P0, f"{where}P0")
         _check_psd(P0, f"{where}P0", strict=True)
         mu0 = _array(mu0, f"{where}mu0", (1, 2))
@@ -436,7 +448,9 @@ class IMM:
         Ps : (B, M, steps, n, n)
         """
         if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 0:
-            raise UserError(f"IMM.predict_modes: steps must be a non-negative integer, got {steps!r}")
+            raise UserError(
+                f"IMM.predict_modes: steps must be a non-negative integer, got {steps!r}"
+            )
         steps = int(steps)
         B, M, n = self._B, self.M, self.n
         xs = np.empty((B, M, steps, n))
