@@ -280,3 +280,16 @@ def test_snapshot_keys_and_shapes():
     assert isinstance(s["time"], float) and s["r_safe"] == 3000.0
     s["positions"][:] = 0  # a copy
     assert np.any(world.positions != 0)
+
+
+def test_every_registered_resolver_and_tracker_runs_in_a_world():
+    from airspace_sim import registry
+
+    for res in registry.names("resolver"):
+        m = World(head_on(res)).run(120)
+        assert m["steps"] == 120, res
+    for tr in registry.names("tracker") + ["truth"]:
+        world = World(head_on("bands", tracker=tr))
+        world.run(120)
+        assert len(world.tracks) == 2, tr
+        assert world.tracks.x.shape == (2, 5)

@@ -94,6 +94,40 @@ class Encounters:
         return Encounters(self.owners[mask], self.rows[mask], self.rel_position[mask],
                           self.rel_velocity[mask], self.valid[mask])
 
+    def compact(self, keep: np.ndarray) -> "Encounters":
+        """Only the slots with ``keep`` (n_own, K) True, packed to the left, K shrunk."""
+        keep = keep & self.valid
+        n = self.owners.size
+        K = int(keep.sum(axis=1).max(initial=0))
+        order = np.argsort(~keep, axis=1, kind="stable")[:, :K]  # kept slots first
+        take = lambda a: np.take_along_axis(a, order.reshape(n, K, *([1] * (a.ndim - 2))), axis=1)  # noqa: E731
+        valid = take(keep)
+        return Encounters(self.owners, np.where(valid, take(self.rows), -1),
+                          np.where(valid[..., None], take(self.rel_position), 0.0),
+                          np.where(valid[..., None], take(self.rel_velocity), 0.0), valid)
+
+
+def reachable(enc: Encounters, own_velocity, radius: float, lookahead: float,
+              step: float = 10.0) -> np.ndarray:
+    """(n_own, K) bool: could the intruder come within ``radius`` during the look-ahead for
+    SOME heading of the ownship (own speed kept, intruder straight)?
+
+    ``|r + v_i t − v_o(ψ) t| ≥ |r + v_i t| − |v_o| t``; the right side is sampled every
+    ``step`` seconds and lowered by its Lipschitz bound ``(|v_i| + |v_o|)·step/2``, so the
+    test never drops an intruder that could matter (the band search's result is the same
+    up to which exact boundary candidates it tries).
+    """
+    vo = np.asarray(own_velocity, dtype=float)[:, None, :]
+    vi = enc.rel_velocity + vo
+    so = np.hypot(vo[..., 0], vo[..., 1])  # (n, 1)
+    t = np.arange(0.0, lookahead + step, step)
+    t[-1] = min(t[-1], lookahead)
+    px = enc.rel_position[..., 0:1] + vi[..., 0:1] * t
+    py = enc.rel_position[..., 1:2] + vi[..., 1:2] * t
+    f = np.hypot(px, py) - so[..., None] * t
+    slack = (np.hypot(vi[..., 0], vi[..., 1]) + so) * step / 2.0
+    return (f.min(axis=-1) - slack < radius) & enc.valid
+
 
 def gather(track_owner, track_x, positions, velocities, runs) -> Encounters:
     """Padded per-ownship arrays of the tracks whose owner has ``runs[owner]`` True."""
@@ -174,6 +208,9 @@ class Avoidance:
                                    np.zeros((enc.owners.size, 1)),
                                    self.r_safe * (1.0 + self.margin), self.lookahead)[:, 0]
             enc = enc.subset(~(ratio0 >= 1.0 - CLEAR_TOLERANCE))
+            # and only on the intruders some heading could bring within the clear radius
+            enc = enc.compact(reachable(enc, velocities[enc.owners],
+                                        self.r_safe * (1.0 + self.margin), self.lookahead))
         if enc.owners.size:
             mx = max_heading_change[enc.owners]
             out = self.resolver.resolve(velocities[enc.owners], enc.rel_position,
