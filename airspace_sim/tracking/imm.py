@@ -40,6 +40,8 @@ Units are whatever the model uses; in this project SI (m, m/s, rad/s), state
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 
 from airspace_sim.dynamics.markov import validate_transition_matrix
@@ -114,6 +116,18 @@ def _unpack(s: np.ndarray, B: int) -> np.ndarray:
     """Inverse of :func:`_pack`: (C, ..., W) → (B, ...)."""
     a = np.moveaxis(s, -1, 1).reshape((s.shape[0] * s.shape[-1],) + s.shape[1:-1])
     return np.ascontiguousarray(a[:B])
+
+
+def _reusable(obj, name: str) -> np.ndarray:
+    """``getattr(obj, name)`` if only ``obj`` refers to that array, else a new empty one like it.
+
+    Refcount of an array referred to only by the attribute: the attribute, the local ``a`` and
+    getrefcount's own argument, 3. Any live view or reference elsewhere makes it larger.
+    """
+    a = getattr(obj, name)
+    if sys.getrefcount(a) <= 3:
+        return a
+    return np.empty_like(a)
 
 
 def _nonzeros(mats: np.ndarray):
@@ -371,12 +385,16 @@ class IMM:
         if z.shape != (B, self.m):
             raise UserError(f"IMM.step: z must have shape {(B, self.m)}, got {z.shape}")
         xs, Ps, mus = self._spare
-        x = np.empty((B, n))
-        P = np.empty((B, n, n))
-        mu = np.empty((B, M))
-        nis = np.empty(B)
-        ll = np.empty((B, M))
-        gated = np.empty(B, dtype=np.bool_)
+        # New output arrays, except that last step's are reused when nothing outside this
+        # object refers to them (no view or reference handed out is still alive): arrays a
+        # caller holds are never overwritten, and a loop that only copies them allocates
+        # (and page-faults) nothing.
+        x = _reusable(self, "_x")
+        P = _reusable(self, "_P")
+        mu = _reusable(self, "_mu")
+        nis = _reusable(self, "_nis")
+        ll = _reusable(self, "_ll")
+        gated = _reusable(self, "_gated")
         self._kernel(
             self._Fr, self._Fc, self._Fv, self._Fnnz, self._Q, self._U,
             self._Hr, self._Hc, self._Hv, self._R, self._Pi, self.gate_threshold,
