@@ -381,7 +381,7 @@ class IMM:
             Measurements; a row with any NaN/inf means no measurement (predict only).
         """
         z = np.ascontiguousarray(z, dtype=float)
-        B, M, n = self._B, self.M, self.n
+        B = self._B
         if z.shape != (B, self.m):
             raise UserError(f"IMM.step: z must have shape {(B, self.m)}, got {z.shape}")
         xs, Ps, mus = self._spare
