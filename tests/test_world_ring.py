@@ -31,3 +31,12 @@ def test_ring_of_32_with_bands_keeps_separation():
     m = World(ring_scenario(32)).run()
     assert m["los_events"] == 0, m
     assert m["nmac_events"] == 0
+
+
+@pytest.mark.slow
+def test_ring_of_64_with_bands_regression_bound():
+    # 64 aircraft on a 67 km ring: 0, 1 and 3 LoS for seeds 0, 1, 2 at the time of writing
+    # (the ring is chaotic: a rounding change moves individual encounters); no NMAC.
+    m = World(ring_scenario(64)).run()
+    assert m["los_events"] <= 3, m
+    assert m["nmac_events"] == 0 and m["min_separation_m"] > 1500.0
