@@ -32,7 +32,6 @@ def busy_scenario(n=30, side=30000.0, seed=3, nmac=1000.0, sensor_range=8000.0):
 
 
 def brute_pairs(pos, radius, active=None):
-    n = len(pos)
     d = np.hypot(*(pos[:, None, :] - pos[None, :, :]).transpose(2, 0, 1))
     i, j = np.nonzero(np.triu(d < radius, k=1))
     if active is not None:

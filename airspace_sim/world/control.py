@@ -45,8 +45,8 @@ from airspace_sim.errors import UserError
 def build_resolver(scenario, dt: float):
     """The scenario's resolver object, with the keyword arguments it accepts."""
     factory = registry.get("resolver", scenario.resolver.kind)
-    offered = dict(r_safe=scenario.separation.r_safe, lookahead_s=scenario.resolver.lookahead,
-                   margin=scenario.resolver.margin, dt=dt)
+    offered = {"r_safe": scenario.separation.r_safe, "lookahead_s": scenario.resolver.lookahead,
+               "margin": scenario.resolver.margin, "dt": dt}
     try:
         params = inspect.signature(factory).parameters
         takes_any = any(p.kind is p.VAR_KEYWORD for p in params.values())
@@ -90,17 +90,17 @@ class Encounters:
     rel_velocity: np.ndarray
     valid: np.ndarray
 
-    def subset(self, mask: np.ndarray) -> "Encounters":
+    def subset(self, mask: np.ndarray) -> Encounters:
         return Encounters(self.owners[mask], self.rows[mask], self.rel_position[mask],
                           self.rel_velocity[mask], self.valid[mask])
 
-    def compact(self, keep: np.ndarray) -> "Encounters":
+    def compact(self, keep: np.ndarray) -> Encounters:
         """Only the slots with ``keep`` (n_own, K) True, packed to the left, K shrunk."""
         keep = keep & self.valid
         n = self.owners.size
         K = int(keep.sum(axis=1).max(initial=0))
         order = np.argsort(~keep, axis=1, kind="stable")[:, :K]  # kept slots first
-        take = lambda a: np.take_along_axis(a, order.reshape(n, K, *([1] * (a.ndim - 2))), axis=1)  # noqa: E731
+        take = lambda a: np.take_along_axis(a, order.reshape(n, K, *([1] * (a.ndim - 2))), axis=1)
         valid = take(keep)
         return Encounters(self.owners, np.where(valid, take(self.rows), -1),
                           np.where(valid[..., None], take(self.rel_position), 0.0),
@@ -179,7 +179,7 @@ class Avoidance:
         self.margin = float(p.get("margin", spec.margin))
         self.search_range = np.radians(float(spec.search_deg))
         self.resume_margin = float(spec.resume_margin)
-        self.confirm_steps = int(math.ceil(float(spec.confirm_s) / dt - 1e-9))
+        self.confirm_steps = math.ceil(float(spec.confirm_s) / dt - 1e-9)
         if spec.turn_preference not in self.PREFERENCES:
             raise UserError(f"{scenario.source}: resolver.turn_preference: expected one of "
                             f"{', '.join(self.PREFERENCES)}, got {spec.turn_preference!r}")
@@ -187,7 +187,7 @@ class Avoidance:
             raise UserError(f"{scenario.source}: resolver.search_deg: expected 0..180 degrees, "
                             f"got {spec.search_deg!r}")
         self.preference = spec.turn_preference
-        self.memory_steps = int(math.ceil(float(spec.side_memory_s) / dt - 1e-9))
+        self.memory_steps = math.ceil(float(spec.side_memory_s) / dt - 1e-9)
         self._clear_for = None  # steps each aircraft has been clear of conflict
         #: whether advice overrides the autopilot ("none" only reports conflicts)
         self.overrides = self.kind != "none"

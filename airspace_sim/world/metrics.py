@@ -64,8 +64,8 @@ class Metrics:
         neither) counts as an NMAC event.
         """
         n = max(self.n, 1)
-        self.los_events += int(len(los_began))
-        self.nmac_events += int(len(nmac_began))
+        self.los_events += len(los_began)
+        self.nmac_events += len(nmac_began)
         if prev_positions is not None and (los_keys.size or prev_los_keys.size):
             k = np.union1d(los_keys, prev_los_keys)
             i, j = k // n, k % n

@@ -44,7 +44,7 @@ class Radar:
             raise UserError(f"sensor.period: must be positive seconds, got {spec.period!r}")
         self.sigma = float(spec.sigma)
         self.pd = float(spec.detection_probability)
-        self.period_steps = max(1, int(round(spec.period / dt)))
+        self.period_steps = max(1, round(spec.period / dt))
 
     def scans(self, step: int) -> bool:
         return step % self.period_steps == 0
