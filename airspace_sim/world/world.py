@@ -10,7 +10,9 @@ One step (``dt`` seconds), in this order:
 
 1. commands: each aircraft's autopilot (``straight``, ``route``, ``markov``, or a plugin)
    gives a turn rate; an avoiding ownship in conflict turns by its resolver advice instead,
-   and turns back toward its route only when that turn is clear (:mod:`.control`); an RL
+   and turns back toward its route only when that turn is clear (:mod:`.control`; policy
+   knobs ``scenario.resolver.search_deg``, ``turn_preference``, ``confirm_s``,
+   ``resume_margin``, ``side_memory_s``); an RL
    agent's finite ``heading_rate`` overrides both. Every turn rate is clipped to the
    aircraft's ``max_turn_rate`` (so the heading changes by at most ``max_turn_rate·dt``).
 2. motion: constant speed, heading ``h → h + ω·dt``; the body flies the chord of that arc
