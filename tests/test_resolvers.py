@@ -206,3 +206,26 @@ def test_closed_loop_ring_keeps_separation():
     # denser ring: the smallest-|ψ| rule alone lets neighbours pick opposite sides; a
     # right-turn bias keeps everyone clear
     assert ring_min_separation("bands", n=16, left_penalty=np.radians(10.0)) >= R
+
+
+def test_bands_model_turn_uses_the_callers_turn_rate():
+    # an instant 90° right turn clears a stationary intruder off the right of the path, the
+    # flown arc (3°/s) does not: with model_turn the resolver must not pick it
+    vo = np.array([[250.0, 0.0]])
+    r = np.array([[[3500.0, -4500.0]]])
+    v = -vo[:, None, :]
+    valid = np.ones((1, 1), bool)
+    mx = np.array([np.pi / 2])
+    w = np.array([np.radians(3.0)])
+    plain = make("bands", r_safe=3000.0, margin=0.0)
+    flown = make("bands", r_safe=3000.0, margin=0.0, model_turn=True)
+    # model_turn off (the default): turn_rate is accepted and ignored
+    a = plain.resolve(vo, r, v, valid, mx, turn_rate=w)
+    b = plain.resolve(vo, r, v, valid, mx)
+    np.testing.assert_array_equal(a.band, b.band)
+    c = flown.resolve(vo, r, v, valid, mx, turn_rate=w)
+    right90 = c.candidates[0] == -np.pi / 2
+    assert a.band[0][right90].all() and not c.band[0][right90].any()
+    # without a turn rate model_turn has nothing to model
+    d = flown.resolve(vo, r, v, valid, mx)
+    np.testing.assert_array_equal(d.band, b.band)

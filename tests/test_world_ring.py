@@ -3,7 +3,8 @@ with the IMM from noisy measurements (σ = 50 m) and resolves with the default r
 
 r_safe = 3 km (the paper's R_safety), 230 m/s, 3°/s turn limit, look-ahead 120 s; the ring
 radius is the smallest on which neighbours start 10% more than 2·r_safe apart (but at least
-20 km).
+20 km). Defaults of the CDA policy (``resume_margin`` 1.5 in particular) are what keeps the
+rings of 32 and 64 clear; see :mod:`airspace_sim.world.control`.
 """
 
 import pytest
@@ -34,9 +35,10 @@ def test_ring_of_32_with_bands_keeps_separation():
 
 
 @pytest.mark.slow
-def test_ring_of_64_with_bands_regression_bound():
-    # 64 aircraft on a 67 km ring: 0, 1 and 3 LoS for seeds 0, 1, 2 at the time of writing
-    # (the ring is chaotic: a rounding change moves individual encounters); no NMAC.
-    m = World(ring_scenario(64)).run()
-    assert m["los_events"] <= 3, m
-    assert m["nmac_events"] == 0 and m["min_separation_m"] > 1500.0
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_ring_of_64_with_bands_keeps_separation(seed):
+    # 64 aircraft on a 67 km ring. With resume_margin 0.2 seeds 0, 1, 2 gave 0, 1, 3 LoS;
+    # with the default 1.5 seeds 0-9 all gave 0 LoS and min separation > 3350 m.
+    m = World(ring_scenario(64, seed=seed)).run()
+    assert m["los_events"] == 0, m
+    assert m["nmac_events"] == 0 and m["min_separation_m"] > 3000.0

@@ -164,6 +164,102 @@ def _cpa_kernel(vo, r, v, valid, psi, radius, lookahead_s):  # pragma: no cover 
     return out
 
 
+#: Largest heading change, rad, flown along one straight chord when the turn is modelled
+#: (:func:`cpa_min_ratio_turning`): 15° (the chord's sagitta at 230 m/s and 3°/s is ≈ 40 m).
+TURN_SEGMENT = float(np.radians(15.0))
+
+
+def cpa_min_ratio_turning(own_velocity, rel_position, rel_velocity, valid, candidates, radius,
+                          lookahead_s, turn_rate, segment=TURN_SEGMENT):
+    """:func:`cpa_min_ratio` with the ownship turning at ``turn_rate`` until ``ψ`` is reached.
+
+    The ownship flies an arc of radius ``|v_o|/ω`` from its current heading to ``heading + ψ``
+    (taking ``|ψ|/ω`` seconds), then straight; the intruder flies straight. The arc is
+    replaced by chords of at most ``segment`` rad whose end points lie on it, so the relative
+    track is piecewise straight and the minimum distance over ``[0, T]`` is the minimum of
+    each piece's clamped CPA. ``turn_rate`` (N,) rad/s (``inf`` or ≤ 0: instantaneous, the
+    same numbers as :func:`cpa_min_ratio`).
+    """
+    vo = np.ascontiguousarray(own_velocity, dtype=float)
+    valid = np.ascontiguousarray(valid, dtype=bool)
+    r = np.ascontiguousarray(rel_position, dtype=float)
+    v = np.ascontiguousarray(rel_velocity, dtype=float)
+    psi = np.ascontiguousarray(candidates, dtype=float)
+    radius = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, dtype=float), valid.shape))
+    w = np.ascontiguousarray(np.broadcast_to(np.asarray(turn_rate, dtype=float),
+                                             (vo.shape[0],)))
+    return _cpa_turn_kernel(vo, r, v, valid, psi, radius, float(lookahead_s), w, float(segment))
+
+
+@njit(cache=True, error_model="numpy")
+def _seg_min(rx, ry, vx, vy, t0, t1):  # pragma: no cover - compiled
+    """min over t in [0, t1 − t0] of |r + t v|² (r at the segment start)."""
+    dot = vx * rx + vy * ry
+    v2 = vx * vx + vy * vy
+    t = -dot / max(v2, 1e-300)
+    t = min(max(t, 0.0), t1 - t0)
+    return max((t * v2 + 2.0 * dot) * t + (rx * rx + ry * ry), 0.0)
+
+
+@njit(cache=True, error_model="numpy")
+def _cpa_turn_kernel(vo, r, v, valid, psi, radius, lookahead_s, w, segment):  # pragma: no cover
+    n_own, n_cand = psi.shape
+    n_int = valid.shape[1]
+    out = np.full((n_own, n_cand), np.inf)
+    pts_t = np.empty(64)
+    pts_x = np.empty(64)
+    pts_y = np.empty(64)
+    for n in range(n_own):
+        speed = np.hypot(vo[n, 0], vo[n, 1])
+        h0 = np.arctan2(vo[n, 1], vo[n, 0])
+        for c in range(n_cand):
+            p = psi[n, c]
+            if np.isnan(p) and n_int > 0:
+                out[n, c] = np.nan
+                continue
+            # ownship break points (time, displacement) along the arc, then the end velocity
+            tau = abs(p) / w[n] if (w[n] > 0.0 and np.isfinite(w[n])) else 0.0
+            tau = min(tau, lookahead_s)
+            m = 0
+            if tau > 0.0:
+                m = min(int(np.ceil(abs(p) / segment - 1e-9)), 62)
+                m = max(m, 1)
+            sgn = 1.0 if p > 0 else -1.0
+            pts_t[0], pts_x[0], pts_y[0] = 0.0, 0.0, 0.0
+            for j in range(1, m + 1):
+                tj = tau * j / m
+                if w[n] > 0.0 and np.isfinite(w[n]):
+                    rad = speed / w[n]
+                    hj = h0 + sgn * w[n] * tj
+                    pts_x[j] = sgn * rad * (np.sin(hj) - np.sin(h0))
+                    pts_y[j] = sgn * rad * (np.cos(h0) - np.cos(hj))
+                pts_t[j] = tj
+            cs, sn = np.cos(h0 + p), np.sin(h0 + p)
+            ovx, ovy = speed * cs, speed * sn  # velocity after the turn
+            best = np.inf
+            for k in range(n_int):
+                if not valid[n, k]:
+                    continue
+                vix = v[n, k, 0] + vo[n, 0]
+                viy = v[n, k, 1] + vo[n, 1]
+                d2 = np.inf
+                for j in range(m):
+                    t0, t1 = pts_t[j], pts_t[j + 1]
+                    ax = r[n, k, 0] + vix * t0 - pts_x[j]
+                    ay = r[n, k, 1] + viy * t0 - pts_y[j]
+                    bx = r[n, k, 0] + vix * t1 - pts_x[j + 1]
+                    by = r[n, k, 1] + viy * t1 - pts_y[j + 1]
+                    dt = t1 - t0
+                    d2 = min(d2, _seg_min(ax, ay, (bx - ax) / dt, (by - ay) / dt, t0, t1))
+                ts = pts_t[m]
+                ax = r[n, k, 0] + vix * ts - pts_x[m]
+                ay = r[n, k, 1] + viy * ts - pts_y[m]
+                d2 = min(d2, _seg_min(ax, ay, vix - ovx, viy - ovy, ts, lookahead_s))
+                best = min(best, d2 * (1.0 / (radius[n, k] * radius[n, k])))
+            out[n, c] = np.sqrt(best)
+    return out
+
+
 def candidate_grid(max_heading_change, resolution, extra=None):
     """Candidates ``(N, C)``: grid ``k·resolution``, the limits ``±max``, and ``extra`` (N, E).
 
@@ -213,6 +309,7 @@ def band_search(
     resolution=DEFAULT_RESOLUTION,
     exact_candidates=True,
     left_penalty=0.0,
+    turn_rate=None,
 ):
     """Choose each ownship's heading change against all its intruders at once.
 
@@ -226,6 +323,9 @@ def band_search(
     lookahead_s : float, s; resolution : grid step, rad; exact_candidates : bool.
     left_penalty : rad, ≥ 0. Left turns (``ψ > 0``) are ranked as if ``|ψ| + left_penalty``
         (a rules-of-the-air bias toward right turns; 0 = the plain smallest-``|ψ|`` rule).
+    turn_rate : None, float or (N,) rad/s. ``None``: a candidate is judged as if the heading
+        changed at once; else as flown: turning at ``turn_rate`` until ``ψ`` is reached,
+        then straight (:func:`cpa_min_ratio_turning`).
 
     Returns
     -------
@@ -250,7 +350,11 @@ def band_search(
     order = np.lexsort((idx, cand > 0, mag), axis=-1)
     cand = np.take_along_axis(cand, order, axis=-1)
     usable = np.take_along_axis(usable, order, axis=-1)
-    ratio = cpa_min_ratio(vo, r, v, valid, np.where(usable, cand, 0.0), radius, lookahead_s)
+    if turn_rate is None:
+        ratio = cpa_min_ratio(vo, r, v, valid, np.where(usable, cand, 0.0), radius, lookahead_s)
+    else:
+        ratio = cpa_min_ratio_turning(vo, r, v, valid, np.where(usable, cand, 0.0), radius,
+                                      lookahead_s, turn_rate)
     ratio = np.where(usable, ratio, -np.inf)
     band = usable & (ratio >= 1.0 - CLEAR_TOLERANCE)
     rows = np.arange(n)

@@ -169,7 +169,10 @@ class BandsResolver:
 
     Parameters: ``r_safe`` (m, 3000), ``lookahead_s`` (s, 120), ``margin`` (0.1: clear
     distance ``r_safe·(1+margin)``), ``resolution`` (rad, 1°), ``exact_candidates`` (True),
-    ``left_penalty`` (rad, 0: left turns rank as ``|ψ| + left_penalty``, a right-turn bias).
+    ``left_penalty`` (rad, 0: left turns rank as ``|ψ| + left_penalty``, a right-turn bias),
+    ``model_turn`` (False; True: when the caller passes ``turn_rate`` to :meth:`resolve`, each
+    candidate is judged as flown, turning at that rate until reached, then straight; False:
+    as if the heading changed at once).
     """
 
     def __init__(
@@ -180,12 +183,14 @@ class BandsResolver:
         resolution=DEFAULT_RESOLUTION,
         exact_candidates=True,
         left_penalty=0.0,
+        model_turn=False,
     ):
         self.r_safe, self.lookahead_s, self.margin = float(r_safe), float(lookahead_s), margin
         self.resolution, self.exact_candidates = float(resolution), bool(exact_candidates)
         self.left_penalty = float(left_penalty)
+        self.model_turn = bool(model_turn)
 
-    def _search(self, vo, r, v, valid, mx, r_safe):
+    def _search(self, vo, r, v, valid, mx, r_safe, turn_rate=None):
         return band_search(
             vo,
             r,
@@ -198,6 +203,7 @@ class BandsResolver:
             self.resolution,
             self.exact_candidates,
             self.left_penalty,
+            turn_rate if self.model_turn else None,
         )
 
     def resolve(
@@ -209,11 +215,12 @@ class BandsResolver:
         max_heading_change,
         mode_predictions=None,
         rel_covariance=None,
+        turn_rate=None,
     ):
         vo, r, v, valid, mx = _arrays(
             own_velocity, rel_position, rel_velocity, valid, max_heading_change
         )
-        res = self._search(vo, r, v, valid, mx, self.r_safe)
+        res = self._search(vo, r, v, valid, mx, self.r_safe, turn_rate)
         return ResolverOutput(res.heading_change, res.conflict, res.candidates, res.band)
 
 
@@ -240,10 +247,12 @@ class ProbabilisticBandsResolver(BandsResolver):
         max_heading_change,
         mode_predictions=None,
         rel_covariance=None,
+        turn_rate=None,
     ):
         if mode_predictions is None:
             return super().resolve(
-                own_velocity, rel_position, rel_velocity, valid, max_heading_change
+                own_velocity, rel_position, rel_velocity, valid, max_heading_change,
+                turn_rate=turn_rate,
             )
         vo, r, v, valid, mx = _arrays(
             own_velocity, rel_position, rel_velocity, valid, max_heading_change
@@ -251,7 +260,7 @@ class ProbabilisticBandsResolver(BandsResolver):
         xs, ps, mu = mode_predictions
         prob = np.where(valid, conflict_probability(xs, ps, mu, self.r_safe), 0.0)
         threat = valid & (prob >= self.threshold)
-        res = self._search(vo, r, v, threat, mx, self.r_safe)
+        res = self._search(vo, r, v, threat, mx, self.r_safe, turn_rate)
         return ResolverOutput(
             res.heading_change, threat.any(axis=-1), res.candidates, res.band, prob
         )
