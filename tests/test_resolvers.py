@@ -229,3 +229,12 @@ def test_bands_model_turn_uses_the_callers_turn_rate():
     # without a turn rate model_turn has nothing to model
     d = flown.resolve(vo, r, v, valid, mx)
     np.testing.assert_array_equal(d.band, b.band)
+
+
+def test_bands_reports_min_ratio_consistent_with_band():
+    vo, r, v, valid = scene()
+    out = make("bands").resolve(vo, r, v, valid, np.full(len(vo), np.pi / 2))
+    assert out.min_ratio is not None and out.min_ratio.shape == out.band.shape
+    used = ~np.isnan(out.candidates)
+    np.testing.assert_array_equal(out.band, used & (out.min_ratio >= 1.0 - 1e-9))
+    assert np.all(out.min_ratio[~used] == -np.inf)

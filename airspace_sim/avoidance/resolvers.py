@@ -60,6 +60,8 @@ class ResolverOutput:
     candidates, band : (N, C) candidate heading changes (rad) and their clear flags, for
         rendering; ``None`` for resolvers without bands.
     probability : (N, K) conflict probability per intruder slot, or ``None``.
+    min_ratio : (N, C) per candidate, minimum over intruders of CPA distance / clear radius
+        (``-inf`` for unused slots), or ``None``.
     """
 
     heading_change: np.ndarray
@@ -67,6 +69,7 @@ class ResolverOutput:
     candidates: np.ndarray | None = None
     band: np.ndarray | None = None
     probability: np.ndarray | None = None
+    min_ratio: np.ndarray | None = None
 
 
 def _arrays(own_velocity, rel_position, rel_velocity, valid, max_heading_change):
@@ -221,7 +224,8 @@ class BandsResolver:
             own_velocity, rel_position, rel_velocity, valid, max_heading_change
         )
         res = self._search(vo, r, v, valid, mx, self.r_safe, turn_rate)
-        return ResolverOutput(res.heading_change, res.conflict, res.candidates, res.band)
+        return ResolverOutput(res.heading_change, res.conflict, res.candidates, res.band,
+                              min_ratio=res.min_ratio)
 
 
 class ProbabilisticBandsResolver(BandsResolver):
@@ -262,7 +266,8 @@ class ProbabilisticBandsResolver(BandsResolver):
         threat = valid & (prob >= self.threshold)
         res = self._search(vo, r, v, threat, mx, self.r_safe, turn_rate)
         return ResolverOutput(
-            res.heading_change, threat.any(axis=-1), res.candidates, res.band, prob
+            res.heading_change, threat.any(axis=-1), res.candidates, res.band, prob,
+            res.min_ratio,
         )
 
 

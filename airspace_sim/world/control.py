@@ -26,7 +26,8 @@ them. On rings of 64 (seeds 0–4) the remaining losses came from aircraft turni
 toward their route into traffic or chasing a receding clear heading late in the
 encounter: with ``resume_margin`` 0.2 seeds 0–4 gave 0, 1, 3, 4, 4 losses; 0.5 and 1.0 one
 loss on some of seeds 5–9; 1.5 none on seeds 0–9 (min separation ≥ 3350 m; extra path
-about 40% instead of 20–27%, mean avoidance turn 45° instead of ~200°). See
+about 40% instead of 20–27%, mean avoidance turn 45° instead of ~200°). Rings of 100: 1
+loss in seeds 0–4; of 200: 5, 1, 8 losses on seeds 0–2 (0.2 gave 25, 31), no NMAC. See
 ``tests/test_world_ring.py``.
 
 Resolvers whose ``resolve`` accepts ``turn_rate`` get each ownship's turn-rate limit
@@ -173,7 +174,11 @@ class Avoidance:
     heading on the right if there is one within the search range (else on the left),
     ``"nearest"`` the resolver's choice; afterwards the committed side is kept while it has
     a clear heading, and remembered for ``side_memory_s`` after the conflict ends (so a
-    conflict flag flickering on noisy tracks does not flip the side). Without commitment (``"none"``), or for resolvers that return no band,
+    conflict flag flickering on noisy tracks does not flip the side). When the committed
+    side has no clear heading, a resolver that reports ``min_ratio`` (``"bands"``) gets the
+    best heading on that side (largest minimum CPA ratio) and the side is kept; otherwise
+    the resolver's choice is used and the side follows it. (Flipping let two ownships of a
+    late encounter on the ring of 200 switch sides at the same step and collide.) Without commitment (``"none"``), or for resolvers that return no band,
     the resolver's advice is used as is. Only tracks older than ``confirm_s`` are used.
     """
 
@@ -238,8 +243,10 @@ class Avoidance:
             c = np.asarray(out.conflict, dtype=bool)
             if (side is not None and self.preference != "none"
                     and getattr(out, "band", None) is not None):
+                mr = getattr(out, "min_ratio", None)
                 psi, new_side = self._commit(psi, c, side[enc.owners],
-                                             np.asarray(out.candidates), np.asarray(out.band))
+                                             np.asarray(out.candidates), np.asarray(out.band),
+                                             None if mr is None else np.asarray(mr))
                 side[enc.owners] = new_side
             advice[enc.owners] = np.clip(psi, -mx, mx)
             conflict[enc.owners] = c
@@ -251,7 +258,7 @@ class Avoidance:
             side[self._clear_for >= max(self.memory_steps, 1)] = 0.0
         return advice, conflict
 
-    def _commit(self, psi, conflict, side, cand, band):
+    def _commit(self, psi, conflict, side, cand, band, min_ratio=None):
         """Heading changes and sides under the turn preference (see the class docstring).
 
         ``cand`` (n, C) candidates sorted by the resolver's preference, ``band`` (n, C) clear.
@@ -273,9 +280,17 @@ class Avoidance:
         else:
             new_side = np.where(fresh, np.sign(psi), new_side)
         kept = conflict & (side != 0)
-        has_s, pick_s = first_clear(cand * side[:, None] >= 0)
+        on_side = cand * side[:, None] >= 0
+        has_s, pick_s = first_clear(on_side)
         psi = np.where(kept & has_s, pick_s, psi)
-        new_side = np.where(kept & ~has_s, np.sign(psi), new_side)
+        if min_ratio is not None:
+            # no clear heading on the committed side: the best one on that side, side kept
+            # (two ownships flipping sides at once can turn into each other)
+            score = np.where(on_side & ~np.isnan(cand), min_ratio, -np.inf)
+            best = cand[rows, np.argmax(score, axis=1)]
+            psi = np.where(kept & ~has_s, best, psi)
+        else:
+            new_side = np.where(kept & ~has_s, np.sign(psi), new_side)
         return psi, np.where(conflict, new_side, side)
 
     def resume_clear(self, enc: Encounters, velocities, turn, max_heading_change) -> np.ndarray:
