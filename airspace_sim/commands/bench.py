@@ -22,6 +22,10 @@ def add_arguments(parser) -> None:
     )  # fmt: skip
     parser.add_argument("--preset", default="seed", help="model preset (default seed)")
     parser.add_argument(
+        "--kernel", choices=("auto", "generated", "loops"), default="auto",
+        help="IMM step kernel (default auto: generated code for the preset's model)",
+    )  # fmt: skip
+    parser.add_argument(
         "--json", metavar="PATH", default=None, help="also write the results as JSON to PATH"
     )
 
@@ -43,6 +47,7 @@ def run(args) -> int:
         repeats=args.repeats,
         filterpy_updates=args.filterpy_updates,
         preset=args.preset,
+        kernel=args.kernel,
     )
     print(format_table(result))
     if args.json:

@@ -43,15 +43,16 @@ def _setup(preset_name: str, B: int, steps: int, seed: int):
     return pre, args, x0, P0, tr.measurements[1:]
 
 
-def _time_ours(preset_name: str, B: int, steps: int, repeats: int, seed: int):
+def _time_ours(preset_name: str, B: int, steps: int, repeats: int, seed: int, kernel: str):
     from airspace_sim.tracking import IMM
 
     pre, args, x0, P0, z = _setup(preset_name, B, steps, seed)
     rates, cpu = [], []
-    imm = IMM(x0=x0, P0=P0, mu0=pre.mu0(), **args)
+    imm = IMM(x0=x0, P0=P0, mu0=pre.mu0(), kernel=kernel, **args)
     imm.step(z[0])  # warm-up: compile or load the kernel
+    used = imm.kernel
     for _ in range(repeats):
-        imm = IMM(x0=x0, P0=P0, mu0=pre.mu0(), **args)
+        imm = IMM(x0=x0, P0=P0, mu0=pre.mu0(), kernel=kernel, **args)
         imm.step(z[0])
         t, c = time.perf_counter(), time.process_time()
         for k in range(1, steps + 1):
@@ -59,7 +60,7 @@ def _time_ours(preset_name: str, B: int, steps: int, repeats: int, seed: int):
         c = time.process_time() - c
         rates.append(B * steps / (time.perf_counter() - t))
         cpu.append(B * steps / c if c > 0 else float("nan"))
-    return rates, cpu
+    return rates, cpu, used
 
 
 def _time_filterpy(preset_name: str, updates: int, repeats: int, seed: int):
@@ -99,13 +100,15 @@ def run_benchmark(
     filterpy_updates: int = 300,
     preset: str = "seed",
     seed: int = 0,
+    kernel: str = "auto",
 ) -> dict:
     """Measure both estimators; return ``{"rows": [...], "meta": {...}}``.
 
     Each row: ``B``, ``ours_updates_per_s`` (median), ``ours_all`` (every repeat),
     ``ours_cpu_updates_per_s`` (median, CPU time), ``filterpy_updates_per_s`` and
     ``filterpy_cpu_updates_per_s`` (medians, None if filterpy is not installed) and
-    ``ratio`` (ours / filterpy, wall clock).
+    ``ratio`` (ours / filterpy, wall clock). ``kernel`` is the IMM's (``meta["kernel"]``
+    says which one ran).
     """
     sizes = [int(b) for b in sizes]
     if not sizes or min(sizes) < 1:
@@ -118,7 +121,7 @@ def run_benchmark(
     fp_cpu_rate = float(np.median(fp_cpu)) if fp_cpu else None
     rows = []
     for B in sizes:
-        ours, ours_cpu = _time_ours(preset, B, int(steps), int(repeats), seed)
+        ours, ours_cpu, used = _time_ours(preset, B, int(steps), int(repeats), seed, kernel)
         rate = float(np.median(ours))
         rows.append(
             dict(
@@ -135,6 +138,7 @@ def run_benchmark(
 
     meta = dict(
         preset=preset,
+        kernel=used,
         steps=int(steps),
         repeats=int(repeats),
         filterpy_updates=int(filterpy_updates),
@@ -170,7 +174,7 @@ def format_table(result: dict) -> str:
     m = result["meta"]
     load = m.get("load_average")
     lines.append(
-        f"(preset {m['preset']}, {m['steps']} steps x {m['repeats']} repeats, median; filterpy "
+        f"(preset {m['preset']}, {m['kernel']} kernel, {m['steps']} steps x {m['repeats']} repeats, median; filterpy "
         f"{m['filterpy_updates']} single-tracker updates; wall clock, CPU time in the last two "
         f"columns" + (f"; load average {load[0]:.1f} on {m['cpu_count']} CPUs)" if load else ")")
     )

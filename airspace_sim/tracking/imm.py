@@ -46,7 +46,7 @@ import numpy as np
 
 from airspace_sim.dynamics.markov import validate_transition_matrix
 from airspace_sim.errors import UserError
-from airspace_sim.tracking import _kernels
+from airspace_sim.tracking import _codegen, _kernels
 
 #: Default gate: a measurement is dropped when it lies outside the 1 − 10⁻⁶ chi-square
 #: region of every mode (d² > 27.6 for m = 2): an in-model measurement is dropped
@@ -170,6 +170,14 @@ class IMM:
     gate_probability : float in (0, 1]
         Chi-square gate (``m`` degrees of freedom) on every mode's ``d²``; 1 disables
         gating. Default :data:`DEFAULT_GATE_PROBABILITY` = 1 − 10⁻⁶.
+    kernel : {"auto", "generated", "loops"}
+        How the step runs. ``"generated"``: straight-line code written for this model's
+        sizes and sparsity (:mod:`._codegen`), 1.5–2.5× faster, compiled once per model
+        structure (~20 s for 3 modes × 5 states, then loaded from the disk cache).
+        ``"loops"``: one kernel for every model size (:mod:`._kernels`). Both give the
+        same bits. ``"auto"`` (default) generates unless the code would be slow to
+        compile (over :data:`._codegen.AUTO_MAX_PRODUCTS` multiplications, e.g. dense
+        6-state models); the choice made is in the attribute ``kernel``.
 
     Attributes (all read-only views; a step replaces them, never mutates them)
     ---------------------------------------------------------------------------
@@ -201,6 +209,7 @@ class IMM:
         mu0,
         offsets=None,
         gate_probability: float = DEFAULT_GATE_PROBABILITY,
+        kernel: str = "auto",
     ):
         F = _array(transitions, "transitions", 3)
         M, n, n2 = F.shape
@@ -253,7 +262,11 @@ class IMM:
         #: chi-square threshold on d² (inf = no gating)
         self.gate_threshold = gate_d2
         self.M, self.n, self.m = M, n, m
-        self._kernel = _kernels.imm_step_kernel()
+        if kernel not in ("auto", "generated", "loops"):
+            raise UserError(
+                f"IMM kernel: expected 'auto', 'generated' or 'loops', got {kernel!r}"
+            )
+        self._choose_kernel(kernel)
 
         x0, P0, mu0 = self._initial(x0, P0, mu0, "")
         B = x0.shape[0]
@@ -265,14 +278,61 @@ class IMM:
                         np.zeros(B, dtype=bool))  # fmt: skip
 
     # ------------------------------------------------------------------ helpers
+    def _choose_kernel(self, kernel: str) -> None:
+        generated = None
+        if kernel != "loops":
+            budget = None if kernel == "generated" else _codegen.AUTO_MAX_PRODUCTS
+            generated = _codegen.step_kernel(self._F, self._H, max_products=budget)
+        if generated is not None:
+            self._kernel, self._W, self.kernel = generated, _codegen.CHUNK, "generated"
+        else:
+            self._kernel, self._W, self.kernel = _kernels.imm_step_kernel(), _kernels.CHUNK, "loops"
+        # the generated kernel stores only the upper triangle of each P_j (less to move)
+        self._tri = self.kernel == "generated"
+
+    def __getstate__(self) -> dict:
+        # the kernel is a compiled function (the generated one from a cache-directory
+        # module): pickle the choice, and find or compile the kernel again on unpickling
+        state = self.__dict__.copy()
+        del state["_kernel"]
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        layout = (self._W, self._tri)
+        xm, Pm = self.x_modes, self.P_modes  # in the pickled layout
+        self._choose_kernel(self.kernel)
+        if (self._W, self._tri) != layout:  # e.g. another version's chunk width: repack
+            self._set_state(np.asarray(xm), np.asarray(Pm), self._mu, self._x, self._P,
+                            self._nis, self._ll, self._gated)  # fmt: skip
+
+    def _pack_P(self, Pm: np.ndarray) -> np.ndarray:
+        """(B, M, n, n) → the kernel's layout (C, M, n, n, W), or (C, M, T, W) with the
+        upper triangles (row-major) for the generated kernel."""
+        if self._tri:
+            k, l = np.triu_indices(self.n)
+            Pm = Pm[..., k, l]
+        return _pack(Pm, self._W)
+
+    def _unpack_P(self) -> np.ndarray:
+        """Inverse of :meth:`_pack_P`: (B, M, n, n)."""
+        a = _unpack(self._Ps, self._B)
+        if not self._tri:
+            return a
+        k, l = np.triu_indices(self.n)
+        P = np.empty(a.shape[:2] + (self.n, self.n))
+        P[..., k, l] = a
+        P[..., l, k] = a
+        return P
+
     def _set_state(self, xm, Pm, mu, x, P, nis, ll, gated):
         """Store a state given in (B, ...) arrays. The mode-conditioned state lives in the
         kernel's chunked structure-of-arrays layout; x_modes/P_modes unpack it on demand."""
-        W = _kernels.CHUNK
+        W = self._W
         self._B = x.shape[0]
-        self._xs, self._Ps, self._mus = _pack(xm, W), _pack(Pm, W), _pack(mu, W)
-        # the kernel's output buffers for the next step (internal, so reused: ping-pong)
-        self._spare = (np.empty_like(self._xs), np.empty_like(self._Ps), np.empty_like(self._mus))
+        self._xs, self._Ps, self._mus = _pack(xm, W), self._pack_P(Pm), _pack(mu, W)
+        # the loops kernel's output buffers, allocated at its first step (then ping-pong)
+        self._spare = None
         self._xm_cache, self._Pm_cache = xm, Pm
         self._mu, self._x, self._P = mu, x, P
         self._nis, self._ll, self._gated = nis, ll, gated
@@ -353,7 +413,7 @@ class IMM:
     def P_modes(self) -> np.ndarray:
         """Mode-conditioned posterior covariances (B, M, n, n) (paper §IV step 3)."""
         if self._Pm_cache is None:
-            self._Pm_cache = _unpack(self._Ps, self._B)
+            self._Pm_cache = self._unpack_P()
         return self._ro(self._Pm_cache)
 
     @property
@@ -384,7 +444,16 @@ class IMM:
         B = self._B
         if z.shape != (B, self.m):
             raise UserError(f"IMM.step: z must have shape {(B, self.m)}, got {z.shape}")
-        xs, Ps, mus = self._spare
+        # The generated kernel reads each chunk's state before it writes it: it updates the
+        # state in place (half the memory traffic). The loops kernel writes into spare
+        # buffers, swapped with the state after the step.
+        inplace = self.kernel == "generated"
+        if inplace:
+            xs, Ps, mus = self._xs, self._Ps, self._mus
+        else:
+            if self._spare is None:
+                self._spare = tuple(np.empty_like(a) for a in (self._xs, self._Ps, self._mus))
+            xs, Ps, mus = self._spare
         # New output arrays, except that last step's are reused when nothing outside this
         # object refers to them (no view or reference handed out is still alive): arrays a
         # caller holds are never overwritten, and a loop that only copies them allocates
@@ -401,8 +470,9 @@ class IMM:
             z, self._xs, self._Ps, self._mus,
             xs, Ps, mus, x, P, mu, nis, ll, gated,
         )  # fmt: skip
-        self._spare = (self._xs, self._Ps, self._mus)
-        self._xs, self._Ps, self._mus = xs, Ps, mus
+        if not inplace:
+            self._spare = (self._xs, self._Ps, self._mus)
+            self._xs, self._Ps, self._mus = xs, Ps, mus
         self._xm_cache = self._Pm_cache = None
         self._mu, self._x, self._P = mu, x, P
         self._nis, self._ll, self._gated = nis, ll, gated
