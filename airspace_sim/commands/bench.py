@@ -17,8 +17,8 @@ def add_arguments(parser) -> None:
         "--sizes", default="1,100,10000", help="comma-separated batch sizes B (default 1,100,10000)"
     )
     parser.add_argument(
-        "--filterpy-updates", type=int, default=300,
-        help="single-tracker filterpy updates to time, split over the repeats (default 300)",
+        "--filterpy-updates", type=int, default=1000,
+        help="single-tracker filterpy updates to time, split over the repeats (default 1000)",
     )  # fmt: skip
     parser.add_argument("--preset", default="seed", help="model preset (default seed)")
     parser.add_argument(

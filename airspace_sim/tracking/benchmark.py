@@ -97,7 +97,7 @@ def run_benchmark(
     sizes=DEFAULT_SIZES,
     steps: int = 20,
     repeats: int = 5,
-    filterpy_updates: int = 300,
+    filterpy_updates: int = 1000,
     preset: str = "seed",
     seed: int = 0,
     kernel: str = "auto",
