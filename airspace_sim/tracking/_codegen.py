@@ -12,8 +12,9 @@ Per chunk: (Z) gather the measurements; (A) mixing, prediction, innovation, ``d�
 ``det S`` — no calls, vectorised; (L) logarithms, the gate and the mode probabilities —
 ``log``/``exp`` are libm calls, so this loop runs a tracker at a time; (B) the update,
 recomputing ``P Hᵀ`` and ``S⁻¹`` from the stored prediction (the same operations, so the
-same bits) rather than storing them, and the combination; (O, S) write the chunk's state
-and scatter the (B, ...) outputs. Every intermediate of a chunk lives in one flat work
+same bits) rather than storing them, and the combination; then block copies write the
+chunk's new state back in place (only the upper triangle of each ``P_j`` is stored) and
+(S) scatters the (B, ...) outputs. Every intermediate of a chunk lives in one flat work
 array indexed at literal offsets, so LLVM can prove that different rows never overlap
 (distinct arrays would each need a run-time alias check, of which it allows only a few).
 
@@ -45,7 +46,7 @@ from numba import types
 from numba.extending import intrinsic
 
 #: Bump when the generated code changes, so stale cached sources are not reused.
-_VERSION = 10
+_VERSION = 11
 
 #: Trackers per chunk. The loop body holds a whole tracker, so the chunk only needs to fill
 #: the SIMD lanes a few times over; 16 keeps a chunk's work array in the L1 cache.
@@ -120,9 +121,9 @@ class _Emitter:
         self.level += 1
 
     def scope(self, on: bool) -> None:
-        """Start (on) or end a straight-line loop body; versions restart with each."""
+        """Start (on) or end a straight-line loop body. Versions go on counting across
+        loops, so that no name is assigned in two loops either."""
         self.ssa = on
-        self._version.clear()
         self._current.clear()
 
     def text(self) -> str:

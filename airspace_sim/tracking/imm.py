@@ -298,6 +298,9 @@ class IMM:
         return state
 
     def __setstate__(self, state: dict) -> None:
+        # (defaults: the layout of objects pickled before there was a choice of kernel)
+        state = {"kernel": "loops", "_W": _kernels.CHUNK, "_tri": False, **state}
+        state.pop("_kernel", None)
         self.__dict__.update(state)
         layout = (self._W, self._tri)
         xm, Pm = self.x_modes, self.P_modes  # in the pickled layout
