@@ -293,3 +293,33 @@ def test_every_registered_resolver_and_tracker_runs_in_a_world():
         world.run(120)
         assert len(world.tracks) == 2, tr
         assert world.tracks.x.shape == (2, 5)
+
+
+def test_left_commitment_returns_right_once_the_right_is_clear():
+    # turn_preference "right": an ownship that committed left only because its right was
+    # blocked goes back right as soon as a right heading is clear; one that committed right
+    # stays right even when the left opens up.
+    from airspace_sim.scenarios import load
+
+    avoid = World(load("demo")).avoidance
+    assert avoid.preference == "right"
+    cand = np.radians([[10.0, -10.0, 20.0, -20.0]] * 3)  # (n, C): left +, right -
+    band = np.array([[True, True, False, False],    # committed left, right now clear
+                     [True, False, False, False],   # committed left, right still blocked
+                     [True, False, False, True]])   # committed right, nearest clear is left
+    side = np.array([1.0, 1.0, -1.0])
+    psi = np.zeros(3)
+    conflict = np.ones(3, dtype=bool)
+    out, new_side = avoid._commit(psi, conflict, side, cand, band)
+    np.testing.assert_array_equal(new_side, [-1.0, 1.0, -1.0])
+    np.testing.assert_allclose(out, np.radians([-10.0, 10.0, -20.0]))
+
+
+def test_demo_scenario_keeps_separation():
+    # Before the rule above, ring06 and ring07 of the demo turned into each other (NMAC,
+    # min separation 1.8e-12 m, extra path 245%).
+    from airspace_sim.scenarios import load
+
+    m = World(load("demo")).run()
+    assert m["los_events"] == 0 and m["nmac_events"] == 0, m
+    assert m["min_separation_m"] > 3000.0
