@@ -386,8 +386,9 @@ def resume_heading_change(
     Parameters
     ----------
     own_velocity : (N, 2) m/s; desired_heading : (N,) rad (world heading, ``atan2(vy, vx)``).
-    rel_position, rel_velocity, valid, max_heading_change, r_safe, lookahead_s, margin:
+    rel_position, rel_velocity, valid, max_heading_change, r_safe, lookahead_s:
         as in :func:`band_search`.
+    margin : float or (N,), fraction of ``r_safe`` kept clear on top of it.
 
     Returns
     -------
@@ -402,7 +403,9 @@ def resume_heading_change(
     r = np.asarray(rel_position, dtype=float).reshape(n, -1, 2)
     v = np.asarray(rel_velocity, dtype=float).reshape(n, -1, 2)
     valid = np.asarray(valid, dtype=bool).reshape(n, -1)
-    radius = np.asarray(r_safe, dtype=float) * (1.0 + margin)
+    radius = np.asarray(r_safe, dtype=float) * (1.0 + np.asarray(margin, dtype=float))
+    if radius.ndim == 1:  # one per ownship
+        radius = radius[:, None]
     ratio = cpa_min_ratio(vo, r, v, valid, delta[:, None], radius, lookahead_s)[:, 0]
     clear = ratio >= 1.0 - CLEAR_TOLERANCE
     return np.where(clear, delta, 0.0), clear

@@ -56,7 +56,8 @@ class Invalid(Exception):
 
 def _check(what: str, ok: Callable[[Any], bool]) -> Callable[[Any], str | None]:
     def check(value):
-        return None if ok(value) else f"expected {what}"
+        # None is an unset optional field (``X | None``); its type check already passed
+        return None if value is None or ok(value) else f"expected {what}"
 
     check.what = what
     return check
@@ -123,6 +124,7 @@ RANGES: dict[str, Callable[[Any], str | None]] = {
     "ResolverSpec.turn_preference": _one_of(("right", "nearest", "none")),
     "ResolverSpec.confirm_s": NON_NEGATIVE,
     "ResolverSpec.resume_margin": NON_NEGATIVE,
+    "ResolverSpec.resume_decay_s": NON_NEGATIVE,
     "AircraftSpec.id": NON_EMPTY,
     "AircraftSpec.speed": POSITIVE,
     "AircraftSpec.autopilot": _one_of_registry("autopilot"),
@@ -131,6 +133,7 @@ RANGES: dict[str, Callable[[Any], str | None]] = {
     "TrafficSpec.count": NON_NEGATIVE_INT,
     "TrafficSpec.radius": POSITIVE,
     "TrafficSpec.sector": POSITIVE,
+    "TrafficSpec.spawn_clear_s": NON_NEGATIVE,
     "TrafficSpec.speed": POSITIVE,
     "TrafficSpec.speed_spread": NON_NEGATIVE,
     "TrafficSpec.autopilot": _one_of_registry("autopilot"),

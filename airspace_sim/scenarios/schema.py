@@ -61,6 +61,10 @@ class ResolverSpec:
     #: extra fraction of r_safe (on top of margin) that a turn back toward the route must
     #: keep clear over the look-ahead (1.5: rings of 64 clear on seeds 0–9; 0.2, 0.5, 1.0 not)
     resume_margin: float = 1.5
+    #: seconds off the route over which resume_margin shrinks linearly to 0 (unset: never).
+    #: Random traffic needs it: there holding the heading until the wide resume clearance
+    #: opens sent whole groups of aircraft out of the sector for good (dense_random.toml)
+    resume_decay_s: float | None = None
     #: seconds the committed turn side is remembered after a conflict ends
     side_memory_s: float = 30.0
 
@@ -88,6 +92,9 @@ class TrafficSpec:
     count: int = 0  #: number of generated aircraft
     radius: float = 20000.0  #: ring radius in metres ("ring")
     sector: float = 60000.0  #: side of the square sector in metres ("random")
+    #: "random": no two aircraft may start on straight paths that lose separation within
+    #: this many seconds (0: only the initial separation is checked)
+    spawn_clear_s: float = 0.0
     speed: float = 230.0  #: ground speed in m/s
     speed_spread: float = 0.0  #: generated speeds uniform in speed ± speed_spread, m/s
     autopilot: str = "route"  #: autopilot of generated aircraft

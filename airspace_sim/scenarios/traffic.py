@@ -11,7 +11,8 @@ ones. Patterns (``traffic.pattern``):
 - ``random``: ``count`` aircraft uniform in a square sector of side ``sector`` metres centred
   on the origin, each flying towards a random point on the sector's edge at least half a side
   away (a route across the sector). Initial separation from every other aircraft is more
-  than r_safe (rejection sampling).
+  than r_safe (rejection sampling); with ``spawn_clear_s`` = T, no pair would lose
+  separation within T seconds flying straight.
 - ``encounter``: the paper's encounter (§VI): ``count`` intruders on a circle of ``radius``
   metres around ``aircraft[0]`` (the ownship), each in a random direction that makes it
   unsafe if both keep straight (closest approach < r_safe, in the future). Intruders do not
@@ -121,32 +122,66 @@ def _edge_point(u: float, side: float) -> tuple[float, float]:
 
 
 def random_sector(scenario: Scenario, rng: np.random.Generator) -> list[AircraftSpec]:
-    """Uniform in a square sector, initially separated by more than r_safe, routes across it."""
+    """Uniform in a square sector, initially separated by more than r_safe, routes across it.
+
+    With ``traffic.spawn_clear_s`` = T > 0, an aircraft (position and route) is redrawn until
+    flying straight it keeps more than r_safe from every aircraft placed before it over
+    ``[0, T]`` seconds, so that no pair is born in a conflict too close to resolve.
+    """
     t = scenario.traffic
-    side, r_safe = t.sector, scenario.separation.r_safe
-    hand = np.array([a.position for a in scenario.aircraft], dtype=float).reshape(-1, 2)
-    placed = np.empty((hand.shape[0] + t.count, 2))
-    placed[: hand.shape[0]] = hand
-    m = hand.shape[0]
+    side, r_safe, clear_s = t.sector, scenario.separation.r_safe, float(t.spawn_clear_s)
+    hand = scenario.aircraft
+    n_hand = len(hand)
+    placed = np.empty((n_hand + t.count, 2))
+    vel = np.empty((n_hand + t.count, 2))  # m/s, for the spawn_clear_s check
+    for k, a in enumerate(hand):
+        placed[k] = a.position
+        h = math.radians(a.heading_deg)
+        vel[k] = a.speed * math.cos(h), a.speed * math.sin(h)
+    m = n_hand
     speeds = _speeds(scenario, rng)
     out = []
     for i, aid in enumerate(_ids("ac", t.count)):
-        p = _place(rng, placed[:m], side, r_safe)
-        if p is None:
-            raise UserError(
-                f"{scenario.source}: traffic.count: cannot place {t.count} aircraft more than "
-                f"r_safe = {r_safe:g} m apart in a {side:g} m sector (placed {i}); "
-                f"use a larger traffic.sector or fewer aircraft, got {t.count}"
-            )
-        placed[m] = p
-        m += 1
-        for _ in range(MAX_TRIES):
-            dest = np.asarray(_edge_point(rng.uniform(0, 4 * side), side))
-            if np.hypot(*(dest - p)) >= side / 2:
+        for _attempt in range(MAX_TRIES):
+            p = _place(rng, placed[:m], side, r_safe)
+            if p is None:
+                raise UserError(
+                    f"{scenario.source}: traffic.count: cannot place {t.count} aircraft more "
+                    f"than r_safe = {r_safe:g} m apart in a {side:g} m sector (placed {i}); "
+                    f"use a larger traffic.sector or fewer aircraft, got {t.count}"
+                )
+            for _ in range(MAX_TRIES):
+                dest = np.asarray(_edge_point(rng.uniform(0, 4 * side), side))
+                if np.hypot(*(dest - p)) >= side / 2:
+                    break
+            heading = math.atan2(dest[1] - p[1], dest[0] - p[0])
+            v = speeds[i] * np.array([math.cos(heading), math.sin(heading)])
+            if clear_s <= 0 or _min_distance(placed[:m] - p, vel[:m] - v, clear_s) > r_safe:
                 break
-        heading = math.atan2(dest[1] - p[1], dest[0] - p[0])
+        else:
+            raise UserError(
+                f"{scenario.source}: traffic.spawn_clear_s: cannot place {t.count} aircraft "
+                f"clear of each other for {clear_s:g} s in a {side:g} m sector (placed {i}); "
+                f"use a smaller traffic.spawn_clear_s, a larger sector or fewer aircraft, "
+                f"got {clear_s:g}"
+            )
+        placed[m], vel[m] = p, v
+        m += 1
         out.append(_spec(scenario, aid, p, heading, speeds[i], [tuple(dest)]))
     return out
+
+
+def _min_distance(rel_pos: np.ndarray, rel_vel: np.ndarray, horizon_s: float) -> float:
+    """Smallest distance over ``[0, horizon_s]`` of straight relative motion, metres.
+
+    rel_pos (K, 2) m, rel_vel (K, 2) m/s; ``inf`` for K = 0.
+    """
+    if rel_pos.shape[0] == 0:
+        return math.inf
+    vv = np.einsum("ij,ij->i", rel_vel, rel_vel)
+    t = -np.einsum("ij,ij->i", rel_pos, rel_vel) / np.where(vv > 0, vv, 1.0)
+    t = np.clip(np.where(vv > 0, t, 0.0), 0.0, horizon_s)
+    return float(np.hypot(*(rel_pos + t[:, None] * rel_vel).T).min())
 
 
 def _place(rng, placed: np.ndarray, side: float, r_safe: float, batch: int = 64):

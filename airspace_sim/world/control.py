@@ -17,7 +17,9 @@ Each step, for every active ownship that avoids (``AircraftSpec.avoid``) or is a
    the autopilot's desired heading (resuming the route once clear) is made only if that
    turn keeps clear by ``r_safe·(1 + margin + resume_margin)`` over the look-ahead
    (:func:`airspace_sim.avoidance.resume_heading_change`), else the heading is held. With
-   resolver ``"none"`` nothing is overridden (conflicts are still reported).
+   ``resume_decay_s`` set, ``resume_margin`` shrinks linearly to 0 over that many seconds
+   off the route (``World.off_route_s``). With resolver ``"none"`` nothing is overridden
+   (conflicts are still reported).
 
 Why these defaults: on converging rings (32 aircraft, IMM tracks from σ = 50 m) the plain
 nearest-clear choice within the one-step turn limit gave about 20 losses of separation;
@@ -32,6 +34,19 @@ the return to the right side (:class:`Avoidance`): rings of 64 still 0 on seeds 
 0 on seeds 0–4, of 200 3, 0, 1 on seeds 0–2 (min separation 1747, 3137, 2689 m), no NMAC;
 ``dense_random`` seeds 0–4: 13, 2, 19, 17, 14 losses (18, 6, 13, 20, 19 before). See
 ``tests/test_world_ring.py``.
+
+Random traffic is the opposite regime: it never disperses, so an aircraft holding its
+heading until the wide resume clearance opened could wait for ever. On ``dense_random``
+(60 aircraft, 100 km sector, 600 s) with look-ahead 120 s and no decay, seeds 0–15 gave
+272 losses, 8 NMAC, extra path 969% and 43 of 60 aircraft still flying at the end, many
+far outside the sector. Over 8 seeds: ``resume_decay_s`` 60 brought the extra path to
+64% but more losses (traffic stays in the sector); a 60 s look-ahead with it 62 losses;
+45 s with ``resume_decay_s`` 30 (and ``traffic.spawn_clear_s`` 120, so no pair starts in a
+conflict too close to resolve) 28 losses, no NMAC, 12.8% extra path. Seeds 0–15 with
+those settings (``scenarios/dense_random.toml``): 68 losses, 0 NMAC, 12.6% extra path,
+3.6 aircraft still flying (no resolver: 871 losses, 47 NMAC). The same decay on rings
+with the 120 s look-ahead gave 487 losses over the 18 ring runs above instead of 4, so it
+is off by default.
 
 Resolvers whose ``resolve`` accepts ``turn_rate`` get each ownship's turn-rate limit
 (rad/s); ``"bands"`` with ``model_turn=True`` then judges each candidate heading as flown
@@ -203,6 +218,7 @@ class Avoidance:
         self.margin = float(p.get("margin", spec.margin))
         self.search_range = np.radians(float(spec.search_deg))
         self.resume_margin = float(spec.resume_margin)
+        self.resume_decay_s = None if spec.resume_decay_s is None else float(spec.resume_decay_s)
         self.confirm_steps = math.ceil(float(spec.confirm_s) / dt - 1e-9)
         if spec.turn_preference not in self.PREFERENCES:
             raise UserError(f"{scenario.source}: resolver.turn_preference: expected one of "
@@ -307,16 +323,25 @@ class Avoidance:
             new_side = np.where(kept & ~has_s, np.sign(psi), new_side)
         return psi, np.where(conflict, new_side, side)
 
-    def resume_clear(self, enc: Encounters, velocities, turn, max_heading_change) -> np.ndarray:
-        """For the ownships of ``enc``: is the heading change ``turn`` (n_own,) clear?"""
+    def resume_clear(self, enc: Encounters, velocities, turn, max_heading_change,
+                     off_route_s=None) -> np.ndarray:
+        """For the ownships of ``enc``: is the heading change ``turn`` (n_own,) clear?
+
+        ``off_route_s`` (N,) seconds each aircraft has been off its autopilot; the extra
+        ``resume_margin`` shrinks linearly to 0 over ``resume_decay_s`` of it.
+        """
         from airspace_sim.avoidance import resume_heading_change
 
         if enc.owners.size == 0:
             return np.zeros(0, dtype=bool)
         vo = velocities[enc.owners]
         desired = np.arctan2(vo[:, 1], vo[:, 0]) + turn
+        extra = np.full(enc.owners.size, self.resume_margin)
+        if off_route_s is not None and self.resume_decay_s is not None:
+            left = 1.0 - np.asarray(off_route_s)[enc.owners] / max(self.resume_decay_s, 1e-9)
+            extra *= np.clip(left, 0.0, 1.0)
         _, clear = resume_heading_change(vo, desired, enc.rel_position, enc.rel_velocity,
                                          enc.valid, max_heading_change[enc.owners],
                                          r_safe=self.r_safe, lookahead_s=self.lookahead,
-                                         margin=self.margin + self.resume_margin)
+                                         margin=self.margin + extra)
         return np.asarray(clear, dtype=bool)

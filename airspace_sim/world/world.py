@@ -12,8 +12,7 @@ One step (``dt`` seconds), in this order:
    gives a turn rate; an avoiding ownship in conflict turns by its resolver advice instead,
    and turns back toward its route only when that turn is clear (:mod:`.control`; policy
    knobs ``scenario.resolver.search_deg``, ``turn_preference``, ``confirm_s``,
-   ``resume_margin``, ``side_memory_s``); an RL
-   agent's finite ``heading_rate`` overrides both. Every turn rate is clipped to the
+   ``resume_margin``, ``resume_decay_s``, ``side_memory_s``); an RL agent's finite ``heading_rate`` overrides both. Every turn rate is clipped to the
    aircraft's ``max_turn_rate`` (so the heading changes by at most ``max_turn_rate·dt``).
 2. motion: constant speed, heading ``h → h + ω·dt``; the body flies the chord of that arc
    (velocity ``v·sinc(ωdt/2)`` at heading ``h + ωdt/2``), integrated by pymunk
@@ -164,6 +163,7 @@ class World:
         self.advice = np.zeros(n)
         self.conflict = np.zeros(n, dtype=bool)
         self._following = np.zeros(n, dtype=bool)
+        self.off_route_s = np.zeros(n)  # seconds since the autopilot last flew it (CDA)
         self._prev_contacts = ()  # positions, LoS and NMAC keys at the previous step
         self._side = np.zeros(n)  # committed avoidance side per aircraft: −1 right, +1 left
         self._enc = Encounters(np.zeros(0, np.int64), np.zeros((0, 0), np.int64),
@@ -193,6 +193,7 @@ class World:
 
         # conflict avoidance
         follow = np.zeros(n, dtype=bool)
+        resuming = np.zeros(n, dtype=bool)
         if self.avoidance.overrides:
             follow = self.avoid & self.active & self.conflict & ~self.controlled
             rate = np.where(follow, self.advice / dt, rate)
@@ -204,7 +205,8 @@ class World:
                 sub = enc.subset(resuming[enc.owners])
                 if sub.owners.size:
                     clear = self.avoidance.resume_clear(sub, self.velocities,
-                                                        ap_rate[sub.owners] * dt, max_dh)
+                                                        ap_rate[sub.owners] * dt, max_dh,
+                                                        self.off_route_s)
                     hold = sub.owners[~clear]
                     rate[hold] = 0.0
                     follow[hold] = True
@@ -223,6 +225,8 @@ class World:
         rate = np.clip(rate, -self.max_turn_rate, self.max_turn_rate)
         rate[~self.active] = 0.0
         self._following = follow
+        # off the route until the autopilot flies it without a pending turn back
+        self.off_route_s = np.where(follow | resuming, self.off_route_s + dt, 0.0)
 
         # motion along the chord of the arc
         turn = rate * dt
