@@ -150,3 +150,71 @@ def test_mixture_limits():
     mu = np.array([0.2, 0.5, 0.3])
     assert conflict_probability(xs, ps, mu, R) == pytest.approx(0.5)
     assert conflict_probability(xs, ps + 1e14 * np.eye(2), mu, R) < 1e-6
+
+
+def test_far_means_are_zero_without_quadrature_and_near_ones_unchanged():
+    from airspace_sim.avoidance import probability as pr
+
+    rng = np.random.default_rng(5)
+    n = 400
+    mean = rng.uniform(-60000, 60000, size=(n, 2))
+    a = rng.normal(size=(n, 2, 2)) * rng.uniform(10, 3000, size=(n, 1, 1))
+    cov = a @ np.swapaxes(a, -1, -2)
+    R = 3000.0
+    got = pr.probability_inside_circle(mean, cov, R)
+    full = pr._inside(mean, cov, np.full(n, R))  # the quadrature everywhere
+    d = np.hypot(*mean.T)
+    u = mean / d[:, None]
+    sig_n = np.sqrt(np.einsum("ri,rij,rj->r", u, cov, u))  # std along the mean's direction
+    far = d - R > pr.WINDOW_SIGMAS * sig_n
+    assert 0 < far.sum() < n
+    assert np.all(got[far] == 0.0) and np.all(full[far] < 1e-13)
+    np.testing.assert_array_equal(got[~far], full[~far])
+
+
+def test_conflict_probability_bound_is_an_upper_bound_and_tight_far_out():
+    from airspace_sim.avoidance.probability import conflict_probability_bound
+
+    rng = np.random.default_rng(9)
+    N, M, S = 300, 3, 4
+    xs = rng.uniform(-15000, 15000, size=(N, M, S, 2))
+    a = rng.normal(size=(N, M, S, 2, 2)) * rng.uniform(50, 4000, size=(N, M, S, 1, 1))
+    Ps = a @ np.swapaxes(a, -1, -2)
+    mu = rng.dirichlet(np.ones(M), size=N)
+    exact = conflict_probability(xs, Ps, mu, 3000.0)
+    bound = conflict_probability_bound(xs, Ps, mu, 3000.0)
+    assert np.all(bound >= exact - 1e-12)
+    assert np.all((bound >= 0) & (bound <= 1))
+    # a point far out along x with small spread: both essentially 0; inside: bound 1
+    x1 = np.array([[[[20000.0, 0.0]]]])
+    P1 = np.array([[[np.diag([100.0**2, 5000.0**2])]]])
+    assert conflict_probability_bound(x1, P1, [[1.0]], 3000.0)[0] < 1e-12
+    assert conflict_probability_bound(x1 * 0.01, P1, [[1.0]], 3000.0)[0] == 1.0
+
+
+def test_probabilistic_bands_threats_unchanged_by_the_bound():
+    # the resolver runs the quadrature only where the bound reaches the threshold: its
+    # threats and advice equal those from the exact probability everywhere
+    from airspace_sim.avoidance.resolvers import ProbabilisticBandsResolver
+
+    rng = np.random.default_rng(2)
+    N, K, M, S = 40, 6, 3, 5
+    r = rng.uniform(-20000, 20000, size=(N, K, 2))
+    v = rng.uniform(-400, 400, size=(N, K, 2))
+    t = np.linspace(6.0, 30.0, S)
+    turn = rng.normal(0, 30, size=(N, K, M, 1, 2)) * t[:, None] ** 1.5 / 10
+    xs = r[:, :, None, None] + v[:, :, None, None] * t[:, None] + turn
+    a = rng.normal(size=(N, K, M, S, 2, 2)) * (50 + 20 * t)[:, None, None]
+    Ps = a @ np.swapaxes(a, -1, -2)
+    mu = rng.dirichlet(np.ones(M), size=(N, K))
+    valid = rng.random((N, K)) < 0.9
+    vo = np.tile([230.0, 0.0], (N, 1))
+    res = ProbabilisticBandsResolver(threshold=0.05)
+    out = res.resolve(vo, r, v - vo[:, None], valid, np.radians(90.0),
+                      mode_predictions=(xs, Ps, mu))
+    exact = np.where(valid, conflict_probability(xs, Ps, mu, 3000.0), 0.0)
+    threat = valid & (exact >= 0.05)
+    assert 0 < threat.sum() < valid.sum()
+    np.testing.assert_array_equal(out.conflict, threat.any(axis=-1))
+    np.testing.assert_array_equal(out.probability[threat], exact[threat])
+    assert np.all(out.probability[valid & ~threat] < 0.05)

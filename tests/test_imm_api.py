@@ -298,6 +298,39 @@ def test_predict_modes_matches_repeated_multiplication():
     np.testing.assert_array_equal(imm.x, x_before)  # no side effect
 
 
+@pytest.mark.parametrize("preset", ["seed", "realistic"])
+def test_predict_modes_at_equals_every_step_prediction_sampled(preset):
+    # the k-step maps against the step-by-step kernel (and through it the loop above)
+    rng = np.random.default_rng(11)
+    p = presets.get(preset)
+    B = 7
+    x0, P0, _ = initial(rng, B)
+    imm = IMM(**p.imm_arguments(), x0=x0, P0=P0, mu0=p.mu0())
+    z = measurements(rng, x0, 6, missing=0, outliers=0)
+    for k in range(6):
+        imm.step(z[k])
+    steps = np.array([1, 2, 5, 12, 40, 120])
+    full_x, full_P = imm.predict_modes(int(steps[-1]))
+    rows = np.array([5, 0, 3])
+    xs, Ps = imm.predict_modes_at(steps, rows)
+    assert xs.shape == (3, 3, 6, 5) and Ps.shape == (3, 3, 6, 5, 5)
+    ref_x, ref_P = full_x[rows][:, :, steps - 1], full_P[rows][:, :, steps - 1]
+    scale_x = np.abs(ref_x).max(axis=-1, keepdims=True)
+    np.testing.assert_allclose(xs, ref_x, rtol=1e-9, atol=0)
+    diag = np.sqrt(np.einsum("...ii->...i", ref_P))
+    # covariances relative to the standard deviations (entries near 0 off the diagonal)
+    np.testing.assert_allclose(Ps / (diag[..., :, None] * diag[..., None, :]),
+                               ref_P / (diag[..., :, None] * diag[..., None, :]), atol=1e-9)
+    assert np.all(scale_x > 0)
+    np.testing.assert_array_equal(Ps, np.swapaxes(Ps, -1, -2))
+    all_x, _ = imm.predict_modes_at(steps)
+    np.testing.assert_array_equal(all_x[rows], xs)
+    with pytest.raises(UserError, match="increasing"):
+        imm.predict_modes_at([3, 2])
+    with pytest.raises(UserError, match="positive"):
+        imm.predict_modes_at([0, 1])
+
+
 # ---------------------------------------------------------------- benchmark and CLI
 def test_benchmark_function_tiny():
     res = run_benchmark(sizes=(1, 3), steps=2, repeats=2, filterpy_updates=4)

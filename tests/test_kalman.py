@@ -149,6 +149,11 @@ def test_predict_ahead_and_imm_view():
     xm, Pm = kf.predict_modes(2)
     assert xm.shape == (1, 1, 2, 5) and Pm.shape == (1, 1, 2, 5, 5)
     assert kf.mu.shape == (1, 1) and kf.x_modes.shape == (1, 1, 5) and kf.P_modes.shape == (1, 1, 5, 5)
+    x_at, P_at = kf.predict_modes_at([1, 4, 9], rows=[0])
+    xs9, Ps9 = kf.predict_ahead(9)
+    assert x_at.shape == (1, 1, 3, 5) and P_at.shape == (1, 1, 3, 5, 5)
+    np.testing.assert_allclose(x_at[0, 0], xs9[0, [0, 3, 8]], rtol=1e-12)
+    np.testing.assert_allclose(P_at[0, 0], Ps9[0, [0, 3, 8]], rtol=1e-12)
 
 
 def test_shape_errors():

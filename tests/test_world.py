@@ -356,3 +356,38 @@ def test_dense_random_traffic_reaches_its_routes():
     assert m["extra_path_pct"] < 40.0, m
     assert world.active.sum() <= 10  # the rest reached the far edge of the sector
     assert (world.progress() > 0).all()  # nobody ends farther from its goal than it started
+
+
+def test_bands_probabilistic_gets_the_tracks_mode_predictions():
+    from airspace_sim.scenarios import load
+
+    world = World(load("demo", ['resolver.kind="bands-probabilistic"',
+                                "resolver.probability_horizon_s=30.0",
+                                "resolver.probability_samples=3"]))
+    seen = []
+    resolve = world.avoidance.resolver.resolve
+
+    def spy(*args, **kw):
+        seen.append(kw.get("mode_predictions"))
+        return resolve(*args, **kw)
+
+    world.avoidance.resolver.resolve = spy
+    world.run(20)
+    assert seen and all(p is not None for p in seen)
+    enc = world._enc
+    xs, Ps, mu = world.mode_predictions(enc, world.avoidance.prediction_times_s)
+    n_own, K = enc.valid.shape
+    assert xs.shape == (n_own, K, 3, 3, 2) and Ps.shape == (n_own, K, 3, 3, 2, 2)
+    np.testing.assert_allclose(mu[enc.valid].sum(axis=-1), 1.0)
+    # mode 0 is constant velocity: intruder x + v·t from its mode-0 posterior, minus the
+    # ownship flying straight (closed form)
+    t = np.array([10.0, 20.0, 30.0])
+    xm = np.asarray(world.tracks.filter.x_modes)
+    o, k = np.argwhere(enc.valid)[0]
+    row = world._enc_track_rows[enc.rows[o, k]]
+    own = enc.owners[o]
+    x0 = xm[row, 0]
+    expect = (np.array([x0[0], x0[2]])[None] + t[:, None] * np.array([x0[1], x0[3]])[None]
+              - world.positions[own] - t[:, None] * world.velocities[own])
+    np.testing.assert_allclose(xs[o, k, 0], expect, rtol=1e-9, atol=1e-6)
+    assert np.all(np.diff(Ps[o, k, 0, :, 0, 0]) > 0)  # uncertainty grows ahead

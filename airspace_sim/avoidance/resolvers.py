@@ -44,7 +44,7 @@ import numpy as np
 from airspace_sim.avoidance.bands import DEFAULT_RESOLUTION, band_search
 from airspace_sim.avoidance.escape import escape_angle, predicted_conflict
 from airspace_sim.avoidance.heading import tangent_heading_change
-from airspace_sim.avoidance.probability import conflict_probability
+from airspace_sim.avoidance.probability import conflict_probability, conflict_probability_bound
 from airspace_sim.registry import register
 
 #: The paper's safety radius R_safety, metres (§VI).
@@ -235,8 +235,14 @@ class ProbabilisticBandsResolver(BandsResolver):
     relative positions (m), ``Ps`` (N, K, M, S, 2, 2) their covariances (m²), ``mu`` (N, K, M)
     mode probabilities. ``P(conflict)`` uses radius ``r_safe`` (no margin). Pairs below the
     threshold are ignored by the band search; ``conflict`` is "some valid pair reaches the
-    threshold". Without ``mode_predictions`` it behaves as ``"bands"``.
+    threshold". Without ``mode_predictions`` it behaves as ``"bands"``. The output's
+    ``probability`` is exact where a closed-form upper bound
+    (:func:`~airspace_sim.avoidance.probability.conflict_probability_bound`) reaches the
+    threshold, and that bound (below the threshold) elsewhere.
     """
+
+    #: the world computes mode predictions only for resolvers that say they use them
+    uses_mode_predictions = True
 
     def __init__(self, threshold=0.05, **params):
         super().__init__(**params)
@@ -262,7 +268,12 @@ class ProbabilisticBandsResolver(BandsResolver):
             own_velocity, rel_position, rel_velocity, valid, max_heading_change
         )
         xs, ps, mu = mode_predictions
-        prob = np.where(valid, conflict_probability(xs, ps, mu, self.r_safe), 0.0)
+        # the quadrature only where the closed-form upper bound can reach the threshold
+        prob = np.where(valid, conflict_probability_bound(xs, ps, mu, self.r_safe), 0.0)
+        need = valid & (prob >= self.threshold)
+        if need.any():
+            prob[need] = conflict_probability(np.asarray(xs)[need], np.asarray(ps)[need],
+                                              np.asarray(mu)[need], self.r_safe)
         threat = valid & (prob >= self.threshold)
         res = self._search(vo, r, v, threat, mx, self.r_safe, turn_rate)
         return ResolverOutput(

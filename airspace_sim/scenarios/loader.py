@@ -125,6 +125,8 @@ RANGES: dict[str, Callable[[Any], str | None]] = {
     "ResolverSpec.confirm_s": NON_NEGATIVE,
     "ResolverSpec.resume_margin": NON_NEGATIVE,
     "ResolverSpec.resume_decay_s": NON_NEGATIVE,
+    "ResolverSpec.probability_horizon_s": POSITIVE,
+    "ResolverSpec.probability_samples": POSITIVE_INT,
     "AircraftSpec.id": NON_EMPTY,
     "AircraftSpec.speed": POSITIVE,
     "AircraftSpec.autopilot": _one_of_registry("autopilot"),

@@ -65,6 +65,10 @@ class ResolverSpec:
     #: Random traffic needs it: there holding the heading until the wide resume clearance
     #: opens sent whole groups of aircraft out of the sector for good (dense_random.toml)
     resume_decay_s: float | None = None
+    #: "bands-probabilistic": seconds over which each intruder mode's prediction is judged
+    #: (unset: the look-ahead), at this many evenly spaced times
+    probability_horizon_s: float | None = None
+    probability_samples: int = 10
     #: seconds the committed turn side is remembered after a conflict ends
     side_memory_s: float = 30.0
 

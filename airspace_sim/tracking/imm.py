@@ -550,5 +550,20 @@ class IMM:
                                np.asarray(self.P_modes), steps, xs, Ps)  # fmt: skip
         return xs, Ps
 
+    def predict_modes_at(self, steps, rows=None):
+        """:meth:`predict_modes` only at the step counts ``steps`` (S,) and for ``rows``.
+
+        ``steps`` positive and increasing; ``rows`` tracker indices (R,) or None for all.
+        Returns xs (R, M, S, n), Ps (R, M, S, n, n), same numbers as
+        ``predict_modes(max(steps))[:, :, steps - 1]`` to rounding, in R·M·S·n² memory
+        (:mod:`airspace_sim.tracking.prediction`).
+        """
+        from airspace_sim.tracking.prediction import predict_modes_at
+
+        xm, Pm = np.asarray(self.x_modes), np.asarray(self.P_modes)
+        if rows is not None:
+            xm, Pm = xm[rows], Pm[rows]
+        return predict_modes_at(self._F, self._Q, self._U, xm, Pm, steps)
+
     def __repr__(self) -> str:
         return f"IMM(B={self.B}, M={self.M}, n={self.n}, m={self.m}, gate_probability={self.gate_probability})"

@@ -162,3 +162,11 @@ class KalmanFilter:
         """As :meth:`IMM.predict_modes` with one mode: (B, 1, steps, n), (B, 1, steps, n, n)."""
         xs, Ps = self.predict_ahead(steps)
         return xs[:, None], Ps[:, None]
+
+    def predict_modes_at(self, steps, rows=None):
+        """As :meth:`IMM.predict_modes_at` with one mode: (R, 1, S, n), (R, 1, S, n, n)."""
+        from airspace_sim.tracking.prediction import predict_modes_at
+
+        x, P = (self.x, self.P) if rows is None else (self.x[rows], self.P[rows])
+        u = np.broadcast_to(np.asarray(self.u, dtype=float), (self.n,))
+        return predict_modes_at(self.F[None], self.Q[None], u[None], x[:, None], P[:, None], steps)

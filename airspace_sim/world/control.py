@@ -234,16 +234,28 @@ class Avoidance:
             rp = inspect.signature(self.resolver.resolve).parameters
             self._takes_turn_rate = "turn_rate" in rp or any(
                 q.kind is q.VAR_KEYWORD for q in rp.values())
+            # only resolvers that use them (``bands`` accepts and ignores them)
+            self._takes_modes = ("mode_predictions" in rp
+                                 and getattr(self.resolver, "uses_mode_predictions", False))
         except (TypeError, ValueError, AttributeError):
-            self._takes_turn_rate = False
+            self._takes_turn_rate = self._takes_modes = False
+        horizon = self.lookahead if spec.probability_horizon_s is None else float(
+            spec.probability_horizon_s)
+        S = int(spec.probability_samples)
+        #: seconds ahead at which mode predictions are sampled (mode-aware resolvers)
+        self.prediction_times_s = horizon * np.arange(1, S + 1) / S
         #: whether advice overrides the autopilot ("none" only reports conflicts)
         self.overrides = self.kind != "none"
 
-    def advise(self, enc: Encounters, velocities, max_heading_change, n: int, side=None):
+    def advise(self, enc: Encounters, velocities, max_heading_change, n: int, side=None,
+               mode_predictions=None):
         """(advice (n,) rad, conflict (n,) bool) for all aircraft (0 / False off ``enc``).
 
         ``side`` (n,) float, updated in place: the committed turn side of each aircraft
-        (−1 right, +1 left, 0 none).
+        (−1 right, +1 left, 0 none). ``mode_predictions(enc, times_s)`` gives a resolver
+        whose ``resolve`` takes ``mode_predictions`` (``"bands-probabilistic"``) the tracks'
+        mode-conditioned predictions at ``probability_samples`` times over
+        ``probability_horizon_s`` (:meth:`World.mode_predictions`).
         """
         advice = np.zeros(n)
         conflict = np.zeros(n, dtype=bool)
@@ -261,6 +273,10 @@ class Avoidance:
         if enc.owners.size:
             mx = max_heading_change[enc.owners]
             kw = {"turn_rate": mx / self.dt} if self._takes_turn_rate else {}
+            if self._takes_modes and mode_predictions is not None:
+                pred = mode_predictions(enc, self.prediction_times_s)
+                if pred is not None:
+                    kw["mode_predictions"] = pred
             out = self.resolver.resolve(velocities[enc.owners], enc.rel_position,
                                         enc.rel_velocity, enc.valid,
                                         np.maximum(mx, self.search_range), **kw)

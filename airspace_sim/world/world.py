@@ -292,9 +292,10 @@ class World:
         t = self.tracks
         ok = t.age >= self.avoidance.confirm_steps  # confirmed tracks only
         self._enc = gather(t.owner[ok], t.x[ok], self.positions, self.velocities, runs)
+        self._enc_track_rows = np.flatnonzero(ok)  # enc.rows index these table rows
         self.advice, self.conflict = self.avoidance.advise(self._enc, self.velocities,
                                                            self.max_turn_rate * self.dt, n,
-                                                           self._side)
+                                                           self._side, self.mode_predictions)
         self.conflict &= self.active
         # metrics
         m = self.metrics_acc
@@ -312,6 +313,39 @@ class World:
                     est_mode = np.argmax(mu, axis=1)
                     true_mode = self.modes[t.intruder[mk]]
             m.tracking(x[:, (0, 2)], self.positions[t.intruder], est_mode, true_mode)
+
+    def mode_predictions(self, enc, times_s, chunk: int = 4096):
+        """Relative mode-conditioned predictions of the tracks in ``enc`` (paper §VI, 4).
+
+        ``times_s`` (S,) seconds ahead (rounded to whole steps). Returns ``(xs, Ps, mu)``:
+        (n_own, K, M, S, 2) intruder-minus-ownship positions in m, the ownship flying
+        straight; (n_own, K, M, S, 2, 2) their covariances, m²; (n_own, K, M) mode
+        probabilities; zeros in unused slots. None if the tracker has no mode predictions
+        (``truth``). Rows are predicted ``chunk`` at a time, so memory stays bounded.
+        """
+        f = self.tracks.filter
+        if f is None or not hasattr(f, "predict_modes_at"):
+            return None
+        steps = np.unique(np.maximum(1, np.rint(np.asarray(times_s) / self.dt))).astype(np.int64)
+        t = steps * self.dt
+        n_own, K = enc.valid.shape
+        mu_all = self.tracks.mu
+        M = mu_all.shape[1]
+        xs = np.zeros((n_own, K, M, steps.size, 2))
+        Ps = np.zeros((n_own, K, M, steps.size, 2, 2))
+        mu = np.zeros((n_own, K, M))
+        oi, ki = np.nonzero(enc.valid)
+        rows = self._enc_track_rows[enc.rows[oi, ki]]
+        for a in range(0, rows.size, chunk):
+            sl = slice(a, a + chunk)
+            x, P = f.predict_modes_at(steps, rows[sl])
+            own = enc.owners[oi[sl]]
+            straight = (self.positions[own][:, None, :] + t[None, :, None]
+                        * self.velocities[own][:, None, :])  # (r, S, 2)
+            xs[oi[sl], ki[sl]] = x[..., (0, 2)] - straight[:, None]
+            Ps[oi[sl], ki[sl]] = P[..., (0, 2), :][..., (0, 2)]
+            mu[oi[sl], ki[sl]] = mu_all[rows[sl]]
+        return xs, Ps, mu
 
     # --------------------------------------------------------------- outputs
     @property
