@@ -386,8 +386,29 @@ def test_bands_probabilistic_gets_the_tracks_mode_predictions():
     o, k = np.argwhere(enc.valid)[0]
     row = world._enc_track_rows[enc.rows[o, k]]
     own = enc.owners[o]
+    # the slot is the track of that ownship, at that relative position
+    assert world.tracks.owner[row] == own
+    np.testing.assert_allclose(world.tracks.x[row, (0, 2)] - world.positions[own],
+                               enc.rel_position[o, k])
     x0 = xm[row, 0]
     expect = (np.array([x0[0], x0[2]])[None] + t[:, None] * np.array([x0[1], x0[3]])[None]
               - world.positions[own] - t[:, None] * world.velocities[own])
     np.testing.assert_allclose(xs[o, k, 0], expect, rtol=1e-9, atol=1e-6)
     assert np.all(np.diff(Ps[o, k, 0, :, 0, 0]) > 0)  # uncertainty grows ahead
+
+
+def test_off_route_time_stays_zero_for_aircraft_that_never_leave_their_route():
+    # route autopilots give ~1e-16 rad/s from atan2 on a straight leg: that must not count
+    # as turning back (it used to let off_route_s grow and eat the resume clearance)
+    from airspace_sim.scenarios import from_dict
+
+    aircraft = [{"id": f"a{i}", "position": [0.0, 20000.0 * i], "heading_deg": 33.0 + 50 * i,
+                 "speed": 230.0, "autopilot": "route",
+                 "waypoints": [[300000.0 * math.cos(math.radians(33.0 + 50 * i)),
+                                20000.0 * i + 300000.0 * math.sin(math.radians(33.0 + 50 * i))]]}
+                for i in range(4)]
+    world = World(from_dict({"name": "apart", "aircraft": aircraft, "sensor": {"range": 5000.0}}))
+    assert world.avoidance.overrides
+    for _ in range(60):
+        world.step()
+        assert np.all(world.off_route_s == 0.0)

@@ -241,6 +241,8 @@ def conflict_probability_bound(xs, Ps, mu, r_safe):
         n = xs / dist[..., None]
         var_n = np.einsum("...i,...ij,...j->...", n, Ps, n)
         z = (r - dist) / np.sqrt(np.maximum(var_n, 0.0))
-    # |x| = 0 (n undefined) or σ_n = 0 inside the circle: bound 1; σ_n = 0 outside: 0
+    # |x| = 0 (n undefined) or σ_n = 0 inside the circle: bound 1; σ_n = 0 outside: 0;
+    # NaN in, NaN out (a broken track must not look safe)
     b = np.where(dist < r, 1.0, np.where(np.isfinite(z), ndtr(z), 0.0))
+    b = np.where(np.isnan(dist) | np.isnan(var_n), np.nan, b)
     return np.clip(np.sum(np.asarray(mu, dtype=float) * b.max(axis=-1), axis=-1), 0.0, 1.0)

@@ -267,13 +267,15 @@ class ProbabilisticBandsResolver(BandsResolver):
         vo, r, v, valid, mx = _arrays(
             own_velocity, rel_position, rel_velocity, valid, max_heading_change
         )
-        xs, ps, mu = mode_predictions
+        xs, ps, mu = (np.asarray(a, dtype=float) for a in mode_predictions)
+        xs = np.broadcast_to(xs, valid.shape + xs.shape[-3:])
+        ps = np.broadcast_to(ps, valid.shape + ps.shape[-4:])
+        mu = np.broadcast_to(mu, valid.shape + mu.shape[-1:])
         # the quadrature only where the closed-form upper bound can reach the threshold
         prob = np.where(valid, conflict_probability_bound(xs, ps, mu, self.r_safe), 0.0)
         need = valid & (prob >= self.threshold)
         if need.any():
-            prob[need] = conflict_probability(np.asarray(xs)[need], np.asarray(ps)[need],
-                                              np.asarray(mu)[need], self.r_safe)
+            prob[need] = conflict_probability(xs[need], ps[need], mu[need], self.r_safe)
         threat = valid & (prob >= self.threshold)
         res = self._search(vo, r, v, threat, mx, self.r_safe, turn_rate)
         return ResolverOutput(

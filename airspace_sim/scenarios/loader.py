@@ -124,7 +124,7 @@ RANGES: dict[str, Callable[[Any], str | None]] = {
     "ResolverSpec.turn_preference": _one_of(("right", "nearest", "none")),
     "ResolverSpec.confirm_s": NON_NEGATIVE,
     "ResolverSpec.resume_margin": NON_NEGATIVE,
-    "ResolverSpec.resume_decay_s": NON_NEGATIVE,
+    "ResolverSpec.resume_decay_s": POSITIVE,
     "ResolverSpec.probability_horizon_s": POSITIVE,
     "ResolverSpec.probability_samples": POSITIVE_INT,
     "AircraftSpec.id": NON_EMPTY,

@@ -61,9 +61,9 @@ class ResolverSpec:
     #: extra fraction of r_safe (on top of margin) that a turn back toward the route must
     #: keep clear over the look-ahead (1.5: rings of 64 clear on seeds 0–9; 0.2, 0.5, 1.0 not)
     resume_margin: float = 1.5
-    #: seconds off the route over which resume_margin shrinks linearly to 0 (unset: never).
-    #: Random traffic needs it: there holding the heading until the wide resume clearance
-    #: opens sent whole groups of aircraft out of the sector for good (dense_random.toml)
+    #: seconds (> 0) off the route over which resume_margin shrinks linearly to 0 (unset:
+    #: never). Random traffic needs it: there holding the heading until the wide resume
+    #: clearance opened sent whole groups of aircraft out of the sector (dense_random.toml)
     resume_decay_s: float | None = None
     #: "bands-probabilistic": seconds over which each intruder mode's prediction is judged
     #: (unset: the look-ahead), at this many evenly spaced times

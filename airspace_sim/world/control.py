@@ -320,7 +320,8 @@ class Avoidance:
                                 new_side)
             # left is only the fallback: back to the convention's side as soon as it has a
             # clear heading (one ownship left and one right can turn into each other)
-            back = conflict & (side > 0) & has_r
+            # (strictly right: straight ahead being clear is no reason to change sides)
+            back = conflict & (side > 0) & first_clear(cand < 0)[0]
             side = np.where(back, -1.0, side)
             new_side = np.where(back, -1.0, new_side)
         else:

@@ -12,8 +12,9 @@ One step (``dt`` seconds), in this order:
    gives a turn rate; an avoiding ownship in conflict turns by its resolver advice instead,
    and turns back toward its route only when that turn is clear (:mod:`.control`; policy
    knobs ``scenario.resolver.search_deg``, ``turn_preference``, ``confirm_s``,
-   ``resume_margin``, ``resume_decay_s``, ``side_memory_s``); an RL agent's finite ``heading_rate`` overrides both. Every turn rate is clipped to the
-   aircraft's ``max_turn_rate`` (so the heading changes by at most ``max_turn_rate·dt``).
+   ``resume_margin``, ``resume_decay_s``, ``side_memory_s``); an RL agent's finite
+   ``heading_rate`` overrides both. Every turn rate is clipped to the aircraft's
+   ``max_turn_rate`` (so the heading changes by at most ``max_turn_rate·dt``).
 2. motion: constant speed, heading ``h → h + ω·dt``; the body flies the chord of that arc
    (velocity ``v·sinc(ωdt/2)`` at heading ``h + ωdt/2``), integrated by pymunk
    (:mod:`.bodies`); pymunk's collision handlers update the pairs in loss of separation,
@@ -49,6 +50,9 @@ from airspace_sim.world.trackers import TrackTable
 
 #: Number of predicted points per track in :meth:`World.snapshot`.
 PREDICTION_POINTS = 6
+#: rad: an autopilot turn smaller than this per step is "on course" (a route autopilot's
+#: atan2 gives ~1e-16 rad/s on a straight leg, which must not count as turning back)
+TURN_TOLERANCE = 1e-9
 
 
 def _predict(x: np.ndarray, horizon: float, n_points: int) -> np.ndarray:
@@ -199,7 +203,7 @@ class World:
             rate = np.where(follow, self.advice / dt, rate)
             # resume toward the autopilot's heading only if that turn is clear
             resuming = (self.avoid & self.active & ~self.conflict & ~self.controlled
-                        & np.isfinite(desired) & (ap_rate != 0.0))
+                        & np.isfinite(desired) & (np.abs(ap_rate) * dt > TURN_TOLERANCE))
             enc = self._enc
             if resuming.any() and enc.owners.size:
                 sub = enc.subset(resuming[enc.owners])
@@ -320,8 +324,9 @@ class World:
         ``times_s`` (S,) seconds ahead (rounded to whole steps). Returns ``(xs, Ps, mu)``:
         (n_own, K, M, S, 2) intruder-minus-ownship positions in m, the ownship flying
         straight; (n_own, K, M, S, 2, 2) their covariances, m²; (n_own, K, M) mode
-        probabilities; zeros in unused slots. None if the tracker has no mode predictions
-        (``truth``). Rows are predicted ``chunk`` at a time, so memory stays bounded.
+        probabilities; zeros in unused slots. S is the number of distinct whole steps in
+        ``times_s``. None if the tracker has no mode predictions (``truth``). Rows are
+        predicted ``chunk`` at a time, so memory stays bounded.
         """
         f = self.tracks.filter
         if f is None or not hasattr(f, "predict_modes_at"):
