@@ -43,10 +43,12 @@ far outside the sector. Over 8 seeds: ``resume_decay_s`` 60 brought the extra pa
 64% but more losses (traffic stays in the sector); a 60 s look-ahead with it 62 losses;
 45 s with ``resume_decay_s`` 30 (and ``traffic.spawn_clear_s`` 120, so no pair starts in a
 conflict too close to resolve) 28 losses, no NMAC, 12.8% extra path. Seeds 0–15 with
-those settings (``scenarios/dense_random.toml``): 68 losses, 0 NMAC, 12.6% extra path,
-3.6 aircraft still flying (no resolver: 871 losses, 47 NMAC). The same decay on rings
-with the 120 s look-ahead gave 487 losses over the 18 ring runs above instead of 4, so it
-is off by default.
+those settings (``scenarios/dense_random.toml``), after off-route time stopped counting
+atan2 rounding in route rates as a turn back: 56 losses, 0 NMAC, 12.7% extra path, 3.5
+aircraft still flying (no resolver: 871 losses, 47 NMAC); varying one setting at a time,
+decay 15 s 61 losses, 60 s 77 (3 NMAC), look-ahead 60 s 103, 120 s 237 (7 NMAC). The
+same decay on rings with the 120 s look-ahead gave 487 losses over the 18 ring runs above
+instead of 4, so it is off by default.
 
 Resolvers whose ``resolve`` accepts ``turn_rate`` get each ownship's turn-rate limit
 (rad/s); ``"bands"`` with ``model_turn=True`` then judges each candidate heading as flown
