@@ -474,3 +474,36 @@ def test_checkpoint_pickles_a_picklable_world(tmp_path):
     world, meta2 = load_checkpoint(tmp_path / "c.pkl")
     assert isinstance(world, _PicklableWorld) and world.state == [1.0, 2.0] and meta2 == meta
     assert not (tmp_path / "c.pkl.tmp").exists()
+
+
+def test_old_checkpoint_resumes_with_new_fields_defaulted_and_a_warning(tmp_path, capsys):
+    # A checkpoint written before resolver.resume_decay_s existed (its pickled Scenario
+    # lacks the attribute) and by other code: it resumes, with the field at its default and
+    # one warning line.
+    import pickle
+
+    from airspace_sim.commands.run import load_checkpoint, save_checkpoint
+    from airspace_sim.scenarios import load
+    from airspace_sim.world import World
+
+    sc = load("head_on")
+    world = World(sc, seed=0)
+    world.run(4)
+    meta = {"scenario": "head_on", "source": sc.source, "seed": 0, "overrides": [],
+            "total_steps": 9}
+    path = tmp_path / "old.ckpt"
+    assert save_checkpoint(path, world, sc, meta) == "replay"
+    record = pickle.loads(path.read_bytes())
+    del record["scenario"].resolver.__dict__["resume_decay_s"]
+    del record["code"]
+    path.write_bytes(pickle.dumps(record))
+    capsys.readouterr()
+    resumed, _ = load_checkpoint(path)
+    assert "warning" in capsys.readouterr().err
+    assert resumed.scenario.resolver.resume_decay_s is None
+    assert resumed.step_count == 4
+    np.testing.assert_array_equal(resumed.positions, world.positions)
+    # same code: no warning
+    save_checkpoint(path, world, sc, meta)
+    load_checkpoint(path)
+    assert capsys.readouterr().err == ""

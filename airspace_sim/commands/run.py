@@ -320,9 +320,42 @@ class _Frames:
 # the pickled World when the World can be pickled. When it cannot (pymunk's cffi handles),
 # --resume rebuilds World(scenario, seed) and replays the steps: the world is deterministic
 # (every random number is a function of seed, aircraft and step), so the resumed state is
-# the same, at the cost of re-simulating.
+# the same, at the cost of re-simulating — under the same code: the record carries a
+# fingerprint of the sources, and resuming under other code warns. The scenario is rebuilt
+# through the loader, so fields added since the checkpoint was written take their defaults.
 
 CHECKPOINT_FORMAT = 1
+
+
+def code_fingerprint() -> str:
+    """SHA-256 (hex, 16 digits) of the ``airspace_sim`` package's Python sources.
+
+    A replayed checkpoint equals the original run only under the same code; resuming under
+    other code is allowed but warned about (:func:`load_checkpoint`).
+    """
+    import hashlib
+
+    import airspace_sim
+
+    root = Path(airspace_sim.__file__).parent
+    h = hashlib.sha256()
+    for f in sorted(root.rglob("*.py")):
+        h.update(f.relative_to(root).as_posix().encode())
+        h.update(b"\0")
+        h.update(f.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def _plain(obj):
+    """A pickled scenario as a TOML-like dict (unset ``None`` fields dropped), so that
+    :func:`~airspace_sim.scenarios.from_dict` can fill fields added since it was saved."""
+    if hasattr(obj, "__dataclass_fields__"):
+        return {k: _plain(v) for k, v in vars(obj).items() if v is not None and k != "source"}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, dict):
+        return {k: _plain(v) for k, v in obj.items()}
+    return obj
 
 
 def save_checkpoint(path: Path, world, scenario, meta: dict) -> str:
@@ -339,6 +372,7 @@ def save_checkpoint(path: Path, world, scenario, meta: dict) -> str:
         "meta": meta,
         "scenario": scenario,
         "steps_taken": int(world.step_count),
+        "code": code_fingerprint(),
     }
     try:
         blob = pickle.dumps(world, protocol=pickle.HIGHEST_PROTOCOL)
@@ -374,13 +408,20 @@ def load_checkpoint(path: Path, quiet: bool = True):
     if not isinstance(record, dict) or record.get("format") != CHECKPOINT_FORMAT:
         raise UserError(f"--resume {path}: not an airspace-sim checkpoint")
     meta = record["meta"]
+    if record.get("code") != code_fingerprint():
+        print(f"airspace-sim: warning: {path} was saved by other airspace_sim code; the resumed "
+              f"run may differ from an uninterrupted one", file=sys.stderr)
     if record.get("world") is not None:
         return pickle.loads(record["world"]), meta
     from tqdm import tqdm
 
+    from airspace_sim.scenarios import from_dict
     from airspace_sim.world import World
 
-    world = World(record["scenario"], seed=meta["seed"])
+    saved = record["scenario"]
+    source = getattr(saved, "source", str(path))
+    scenario = from_dict(_plain(saved), source=source)  # fields added since: defaults
+    world = World(scenario, seed=meta["seed"])
     for _ in tqdm(
         range(record["steps_taken"]),
         desc="replaying",
