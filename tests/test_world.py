@@ -412,3 +412,10 @@ def test_off_route_time_stays_zero_for_aircraft_that_never_leave_their_route():
     for _ in range(60):
         world.step()
         assert np.all(world.off_route_s == 0.0)
+
+
+def test_extra_path_pct_is_nan_without_planned_paths():
+    from airspace_sim.scenarios import load
+
+    m = World(load("dense_random", ['traffic.autopilot="markov"', "traffic.count=6"])).run(20)
+    assert math.isnan(m["extra_path_pct"]) and m["extra_path_m"] == 0.0

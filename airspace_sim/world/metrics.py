@@ -17,7 +17,8 @@ Definitions (units SI; ``d`` a true centre distance between two aircraft):
 - extra path: for aircraft with a plan (``route`` or ``straight`` autopilot),
   ``flown − planned distance covered`` (route: plan length minus distance still to go along
   the route; straight: progress along the initial heading). ``extra_path_m`` (sum),
-  ``extra_path_pct`` (100·Σ extra / Σ planned covered).
+  ``extra_path_pct`` (100·Σ extra / Σ planned covered; NaN when nothing planned was covered,
+  e.g. only Markov autopilots, where a percentage would mean nothing).
 - ``avoidance_turn_deg``: mean over aircraft of the total |heading change| flown while
   following resolver advice, degrees.
 - tracking: ``track_rmse_m``: RMS of the position error of every track at every step;
@@ -130,7 +131,7 @@ class Metrics:
             "alerts": self.alerts,
             "conflict_s": self.conflict_steps * self.dt,
             "extra_path_m": float(extra.sum()),
-            "extra_path_pct": 100.0 * float(extra.sum()) / planned if planned > 0 else 0.0,
+            "extra_path_pct": 100.0 * float(extra.sum()) / planned if planned > 0 else math.nan,
             "avoidance_turn_deg": float(np.degrees(self.avoid_turn).mean()) if self.n else 0.0,
             "track_rmse_m": math.sqrt(self.sq_err / self.track_samples) if self.track_samples else math.nan,
             "mode_accuracy": self.mode_hits / self.mode_samples if self.mode_samples else math.nan,
