@@ -32,8 +32,8 @@ about 40% instead of 20–27%, mean avoidance turn 45° instead of ~200°). Ring
 loss in seeds 0–4; of 200: 5, 1, 8 losses on seeds 0–2 (0.2 gave 25, 31), no NMAC. With
 the return to the right side (:class:`Avoidance`): rings of 64 still 0 on seeds 0–9, of 100
 0 on seeds 0–4, of 200 3, 0, 1 on seeds 0–2 (min separation 1747, 3137, 2689 m), no NMAC;
-``dense_random`` seeds 0–4: 13, 2, 19, 17, 14 losses (18, 6, 13, 20, 19 before). See
-``tests/test_world_ring.py``.
+``dense_random`` with its then 120 s look-ahead, seeds 0–4: 13, 2, 19, 17, 14 losses (18, 6,
+13, 20, 19 before). See ``tests/test_world_ring.py``.
 
 Random traffic is the opposite regime: it never disperses, so an aircraft holding its
 heading until the wide resume clearance opened could wait for ever. On ``dense_random``
