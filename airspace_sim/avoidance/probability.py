@@ -82,10 +82,7 @@ def probability_inside_circle(mean, cov, radius):
     # P(|X| < R) ≤ P(n·X < R) = Φ(−(|m| − R)/σ_n) along the mean's direction n; below
     # Φ(−WINDOW_SIGMAS) ≈ 6e-16 it is 0, with no quadrature. In a world most (pair, mode,
     # time) predictions are such, and the quadrature costs ~150 normal-CDF pairs each.
-    dist = np.hypot(mean[..., 0], mean[..., 1])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        n = mean / dist[..., None]
-    var_n = np.einsum("...i,...ij,...j->...", n, cov, n)
+    dist, var_n = _radial(mean, cov)
     far = (dist - big_r > 0) & (dist - big_r > WINDOW_SIGMAS * np.sqrt(np.maximum(var_n, 0.0)))
     if far.any():
         out = np.zeros(shape)
@@ -94,6 +91,15 @@ def probability_inside_circle(mean, cov, radius):
             out[near] = _inside(mean[near], cov[near], big_r[near])
         return out
     return _inside(mean, cov, big_r)
+
+
+def _radial(mean, cov):
+    """``|mean|`` and the variance along ``n = mean/|mean|`` (NaN where ``mean = 0``):
+    (...,) each, for ``mean`` (..., 2) and ``cov`` (..., 2, 2)."""
+    dist = np.hypot(mean[..., 0], mean[..., 1])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        n = mean / dist[..., None]
+    return dist, np.einsum("...i,...ij,...j->...", n, cov, n)
 
 
 def _inside(mean, cov, big_r):
@@ -236,13 +242,11 @@ def conflict_probability_bound(xs, Ps, mu, r_safe):
     xs = np.asarray(xs, dtype=float)
     Ps = np.asarray(Ps, dtype=float)
     r = np.asarray(r_safe, dtype=float)[..., None, None]
-    dist = np.hypot(xs[..., 0], xs[..., 1])
+    dist, var_n = _radial(xs, Ps)
     with np.errstate(divide="ignore", invalid="ignore"):
-        n = xs / dist[..., None]
-        var_n = np.einsum("...i,...ij,...j->...", n, Ps, n)
         z = (r - dist) / np.sqrt(np.maximum(var_n, 0.0))
     # |x| = 0 (n undefined) or σ_n = 0 inside the circle: bound 1; σ_n = 0 outside: 0;
     # NaN in, NaN out (a broken track must not look safe)
     b = np.where(dist < r, 1.0, np.where(np.isfinite(z), ndtr(z), 0.0))
-    b = np.where(np.isnan(dist) | np.isnan(var_n), np.nan, b)
+    b = np.where(np.isnan(dist) | np.isnan(Ps).any(axis=(-2, -1)), np.nan, b)
     return np.clip(np.sum(np.asarray(mu, dtype=float) * b.max(axis=-1), axis=-1), 0.0, 1.0)

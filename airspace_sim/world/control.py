@@ -320,9 +320,8 @@ class Avoidance:
             psi = np.where(fresh & has_r, pick_r, np.where(fresh & ~has_r & has_l, pick_l, psi))
             new_side = np.where(fresh, np.where(has_r, -1.0, np.where(has_l, 1.0, np.sign(psi))),
                                 new_side)
-            # left is only the fallback: back to the convention's side as soon as it has a
-            # clear heading (one ownship left and one right can turn into each other)
-            # (strictly right: straight ahead being clear is no reason to change sides)
+            # left is only the fallback: back to the convention's side as soon as a strictly
+            # right heading is clear (one ownship left and one right can turn into each other)
             back = conflict & (side > 0) & first_clear(cand < 0)[0]
             side = np.where(back, -1.0, side)
             new_side = np.where(back, -1.0, new_side)
