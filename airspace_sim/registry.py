@@ -18,8 +18,8 @@ import importlib.metadata
 import importlib.util
 import os
 import sys
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 from airspace_sim.errors import UserError
 

@@ -12,6 +12,7 @@ import pytest
 from scipy import stats
 
 from airspace_sim.dynamics import models, presets
+from airspace_sim.tracking import IMM
 from airspace_sim.tracking.consistency import (
     chi2_band,
     monte_carlo,
@@ -19,7 +20,6 @@ from airspace_sim.tracking.consistency import (
     nis,
     two_point_initialisation,
 )
-from airspace_sim.tracking import IMM
 
 N_RUNS, N_STEPS, BURN_IN, SEED = 200, 300, 30, 2026
 

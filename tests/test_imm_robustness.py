@@ -149,7 +149,7 @@ def test_missing_outliers_offsets_match_reference():
     x, q = x0.copy(), np.zeros(B, dtype=int)
     Pi = args["transition_matrix"]
     n_missing = n_gated = 0
-    for k in range(T):
+    for _k in range(T):
         x, q = propagate_truth(args, x, q, rng, Pi)
         z = x[:, [0, 2]] + 50.0 * rng.standard_normal((B, 2))
         u = rng.random(B)
@@ -295,7 +295,7 @@ def test_extreme_inputs_stay_finite_and_pd(pos_scale, p_scale, z_offset, missing
     x0 = rng.standard_normal((B, 5)) * [pos_scale, 300, pos_scale, 300, 0.5]
     P0 = np.diag([p_scale, p_scale / 100, p_scale, p_scale / 100, 0.1])
     imm = IMM(x0=x0, P0=P0, mu0=rng.dirichlet(np.ones(3), B), **args)
-    for k in range(30):
+    for _k in range(30):
         z = x0[:, [0, 2]] + z_offset * rng.standard_normal((B, 2))
         z[rng.random(B) < missing] = np.nan
         imm.step(z)

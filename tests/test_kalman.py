@@ -43,7 +43,7 @@ def test_matches_filterpy_random_models(n, m):
     P0 = A @ np.swapaxes(A, 1, 2) + np.eye(n)
     kf = KalmanFilter(F, Q, H, R, x0, P0)
     refs = [_filterpy(F, Q, H, R, x0[b], P0[b]) for b in range(B)]
-    for k in range(T):
+    for _k in range(T):
         z = rng.standard_normal((B, m)) * 3
         z[rng.random(B) < 0.2] = np.nan  # missed detections: predict only
         kf.step(z)
@@ -139,7 +139,7 @@ def test_predict_ahead_and_imm_view():
     F, Q = models.constant_velocity(1.0), models.white_noise_acceleration(1.0, 1.0)
     H, R = models.position_measurement_matrix(), models.measurement_noise()
     kf = KalmanFilter(F, Q, H, R, np.array([[0.0, 10.0, 0.0, -5.0, 0.0]]), np.eye(5))
-    x, P = kf.x.copy(), kf.P.copy()
+    x, _P = kf.x.copy(), kf.P.copy()
     xs, Ps = kf.predict_ahead(3)
     np.testing.assert_array_equal(kf.x, x)
     np.testing.assert_allclose(xs[0, 2], np.linalg.matrix_power(F, 3) @ x[0])

@@ -13,7 +13,8 @@ from airspace_sim.dynamics.models import (
     transition,
     white_noise_acceleration,
 )
-from airspace_sim.dynamics.presets import Preset, get as get_preset
+from airspace_sim.dynamics.presets import Preset
+from airspace_sim.dynamics.presets import get as get_preset
 from airspace_sim.dynamics.truth import Trajectories, simulate
 
 __all__ = [

@@ -156,7 +156,7 @@ class Preset:
             offsets=self.turn_rate_offsets(),
         )
 
-    def with_(self, **changes) -> "Preset":
+    def with_(self, **changes) -> Preset:
         """A copy with some fields changed (e.g. ``preset.with_(dt=0.5)``).
 
         Per-step numbers that come from continuous-time fields are rebuilt for the new

@@ -283,7 +283,7 @@ def assemble(out, runs: int, resolvers):
     keys = list(zip(t.column("resolver").to_pylist(), t.column("encounter").to_pylist()))
     if len(set(keys)) != len(keys):
         seen, keep = set(), []
-        for j, k in enumerate(keys):
+        for _j, k in enumerate(keys):
             keep.append(k not in seen)
             seen.add(k)
         warnings.warn(f"{parts}: {len(keys) - len(seen)} duplicate rows dropped", stacklevel=2)
@@ -303,7 +303,7 @@ def summarize(table) -> list[dict]:
     for name in names:
         sel = np.array([r == name for r in cols["resolver"]])
 
-        def col(key):
+        def col(key, sel=sel):
             return np.asarray(cols[key], dtype=float)[sel]
 
         def ratio(num, den):

@@ -434,7 +434,7 @@ class Renderer:
         if self._window is None:
             if not has_display():
                 if not self._warned_no_display:
-                    warnings.warn("render_mode='human': no display found, frames are not shown")
+                    warnings.warn("render_mode='human': no display found, frames are not shown", stacklevel=2)
                     self._warned_no_display = True
                 return
             pygame.display.init()

@@ -24,8 +24,9 @@ import re
 import tomllib
 import types
 import typing
+from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any
 
 import airspace_sim
 from airspace_sim.errors import UserError

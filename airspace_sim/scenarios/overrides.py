@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import re
 import tomllib
-from typing import Any, Iterable
+from collections.abc import Iterable
+from typing import Any
 
 from airspace_sim.errors import UserError
 
