@@ -96,7 +96,9 @@ def load_plugins() -> list[str]:
                 obj()
         except Exception as exc:
             dist = getattr(getattr(ep, "dist", None), "name", None)
-            where = f"entry point {ep.name} = {ep.value}" + (f" (distribution {dist})" if dist else "")
+            where = f"entry point {ep.name} = {ep.value}" + (
+                f" (distribution {dist})" if dist else ""
+            )
             raise UserError(f"plugin {where}: failed to load: {_one_line(exc)}") from exc
         loaded.append(f"entry point {ep.name}")
     seen = set()

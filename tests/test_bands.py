@@ -353,8 +353,11 @@ def _flown_min_ratio(vo, r, v, valid, psi, radius, T, w, steps=24001):
     ox = np.concatenate([[0.0], np.cumsum(s * np.cos(mid) * dt)])
     oy = np.concatenate([[0.0], np.cumsum(s * np.sin(mid) * dt)])
     vi = v + vo
-    d = [np.hypot(r[k, 0] + vi[k, 0] * t - ox, r[k, 1] + vi[k, 1] * t - oy).min() / radius
-         for k in range(len(valid)) if valid[k]]
+    d = [
+        np.hypot(r[k, 0] + vi[k, 0] * t - ox, r[k, 1] + vi[k, 1] * t - oy).min() / radius
+        for k in range(len(valid))
+        if valid[k]
+    ]
     return min(d) if d else np.inf
 
 
@@ -400,7 +403,8 @@ def test_band_search_with_turn_rate_sees_the_turn_path():
     inst = cpa_min_ratio(vo, r, v, valid, psi, R, 120.0)[0, 0]
     flown = cpa_min_ratio_turning(vo, r, v, valid, psi, R, 120.0, np.radians(3.0))[0, 0]
     assert inst > 1.0 and flown < 1.0
-    res = band_search(vo, r, v, valid, np.array([np.pi / 2]), R, 120.0, 0.0,
-                      turn_rate=np.radians(3.0))
+    res = band_search(
+        vo, r, v, valid, np.array([np.pi / 2]), R, 120.0, 0.0, turn_rate=np.radians(3.0)
+    )
     ok = res.band[0] & (res.candidates[0] == -np.pi / 2)
     assert not ok.any()

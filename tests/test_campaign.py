@@ -25,8 +25,12 @@ def _keys(table):
 
 
 def test_workers_do_not_change_results(tmp_path):
-    one = run_campaign(tmp_path / "k1.parquet", 20, RESOLVERS, workers=1, chunk_size=5, progress=False)
-    two = run_campaign(tmp_path / "k2.parquet", 20, RESOLVERS, workers=2, chunk_size=5, progress=False)
+    one = run_campaign(
+        tmp_path / "k1.parquet", 20, RESOLVERS, workers=1, chunk_size=5, progress=False
+    )
+    two = run_campaign(
+        tmp_path / "k2.parquet", 20, RESOLVERS, workers=2, chunk_size=5, progress=False
+    )
     assert one.num_rows == 40
     assert 0 < sum(one.column("n_manoeuvres").to_pylist())
     assert _same(one, two)
@@ -79,12 +83,15 @@ def test_world_campaign_rows_and_summary(tmp_path):
     assert "| bands | world | 4 |" in text
 
 
-@pytest.mark.parametrize("args,needle", [
-    (["--resolver", "nope"], "unknown resolver 'nope'"),
-    (["--runs", "0"], "--runs"),
-    (["--workers", "0"], "--workers"),
-    (["--frame", "sideways"], "--frame"),
-])
+@pytest.mark.parametrize(
+    "args,needle",
+    [
+        (["--resolver", "nope"], "unknown resolver 'nope'"),
+        (["--runs", "0"], "--runs"),
+        (["--workers", "0"], "--workers"),
+        (["--frame", "sideways"], "--frame"),
+    ],
+)
 def test_bad_cli_input_is_one_line_exit_2(tmp_path, capsys, args, needle):
     code = cli.main(["encounters", "--out", str(tmp_path / "x.parquet"), "--no-progress", *args])
     err = capsys.readouterr().err
@@ -95,8 +102,20 @@ def test_bad_cli_input_is_one_line_exit_2(tmp_path, capsys, args, needle):
 
 
 def test_cli_runs_and_prints_summary(tmp_path, capsys):
-    code = cli.main(["encounters", "--runs", "3", "--resolver", "none,seed", "--out",
-                     str(tmp_path / "c.parquet"), "--no-progress", "--summary-md", str(tmp_path / "s.md")])
+    code = cli.main(
+        [
+            "encounters",
+            "--runs",
+            "3",
+            "--resolver",
+            "none,seed",
+            "--out",
+            str(tmp_path / "c.parquet"),
+            "--no-progress",
+            "--summary-md",
+            str(tmp_path / "s.md"),
+        ]
+    )
     out = capsys.readouterr().out
     assert code == 0
     assert "LoS rate" in out and "seed" in out

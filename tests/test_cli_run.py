@@ -489,8 +489,13 @@ def test_old_checkpoint_resumes_with_new_fields_defaulted_and_a_warning(tmp_path
     sc = load("head_on")
     world = World(sc, seed=0)
     world.run(4)
-    meta = {"scenario": "head_on", "source": sc.source, "seed": 0, "overrides": [],
-            "total_steps": 9}
+    meta = {
+        "scenario": "head_on",
+        "source": sc.source,
+        "seed": 0,
+        "overrides": [],
+        "total_steps": 9,
+    }
     path = tmp_path / "old.ckpt"
     assert save_checkpoint(path, world, sc, meta) == "replay"
     record = pickle.loads(path.read_bytes())

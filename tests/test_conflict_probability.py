@@ -217,8 +217,9 @@ def test_probabilistic_bands_threats_unchanged_by_the_bound():
     valid = rng.random((N, K)) < 0.9
     vo = np.tile([230.0, 0.0], (N, 1))
     res = ProbabilisticBandsResolver(threshold=0.05)
-    out = res.resolve(vo, r, v - vo[:, None], valid, np.radians(90.0),
-                      mode_predictions=(xs, Ps, mu))
+    out = res.resolve(
+        vo, r, v - vo[:, None], valid, np.radians(90.0), mode_predictions=(xs, Ps, mu)
+    )
     exact = np.where(valid, conflict_probability(xs, Ps, mu, 3000.0), 0.0)
     threat = valid & (exact >= 0.05)
     assert 0 < threat.sum() < valid.sum()

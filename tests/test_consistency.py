@@ -38,12 +38,16 @@ def test_chi2_band_textbook_values():
     # Bar-Shalom et al. 2001 §5.4: N = 50 runs, m = 2: 95% band for the average NIS is
     # [1.5, 2.5] (χ²(100) quantiles 74.2 and 129.6 divided by 50).
     lo, hi = chi2_band(2, 50, 0.95)
-    assert lo == pytest.approx(74.222 / 50, rel=1e-4) and hi == pytest.approx(129.561 / 50, rel=1e-4)
+    assert lo == pytest.approx(74.222 / 50, rel=1e-4) and hi == pytest.approx(
+        129.561 / 50, rel=1e-4
+    )
     # one run: plain χ² quantiles
     assert chi2_band(4, 1, 0.95) == pytest.approx((0.4844, 11.1433), rel=1e-3)
     # wider for higher probability, narrower for more runs, always around dof
     assert chi2_band(4, 200, 0.99)[1] > chi2_band(4, 200, 0.95)[1] > 4 > chi2_band(4, 200, 0.95)[0]
-    assert chi2_band(2, 1000)[1] - chi2_band(2, 1000)[0] < chi2_band(2, 100)[1] - chi2_band(2, 100)[0]
+    assert (
+        chi2_band(2, 1000)[1] - chi2_band(2, 1000)[0] < chi2_band(2, 100)[1] - chi2_band(2, 100)[0]
+    )
     with pytest.raises(ValueError):
         chi2_band(0, 10)
 
@@ -73,7 +77,9 @@ def test_two_point_initialisation_covariance_is_the_error_covariance():
     z0 = p0 + s * rng.standard_normal((B, 2))
     z1 = p0 + v * dt + s * rng.standard_normal((B, 2))
     x0, P0 = two_point_initialisation(z0, z1, dt, R, (0.0, 0.05, -0.05), (0.6, 0.2, 0.2))
-    err = x0[:, :4] - np.stack([p0[:, 0] + v[:, 0] * dt, v[:, 0], p0[:, 1] + v[:, 1] * dt, v[:, 1]], 1)
+    err = x0[:, :4] - np.stack(
+        [p0[:, 0] + v[:, 0] * dt, v[:, 0], p0[:, 1] + v[:, 1] * dt, v[:, 1]], 1
+    )
     C = np.cov(err.T)
     P = P0[0, :4, :4]
     sd = np.sqrt(np.outer(np.diag(P), np.diag(P)) * 2 / B)  # ≥ sd of each sample (co)variance

@@ -33,7 +33,9 @@ def test_draws_do_not_depend_on_the_batch():
         np.testing.assert_array_equal(big[k][2], one[k][0], err_msg=k)
 
 
-@pytest.mark.parametrize("frame,resolver", [("relative", "seed"), ("relative", "bands"), ("world", "bands")])
+@pytest.mark.parametrize(
+    "frame,resolver", [("relative", "seed"), ("relative", "bands"), ("world", "bands")]
+)
 def test_encounter_result_independent_of_batch(frame, resolver):
     run = run_relative if frame == "relative" else run_world
     batch = run(11, [5, 2, 8, 3], resolver).metrics
@@ -65,7 +67,9 @@ def test_none_resolver_min_separation_is_the_closed_form_cpa_world():
     v_rel = truth[0][:, [1, 3]] - own[:, [1, 3]]
     # the relative velocity points at the aim point
     np.testing.assert_allclose(v_rel / np.linalg.norm(v_rel, axis=1)[:, None], u, atol=1e-9)
-    np.testing.assert_allclose(np.linalg.norm(truth[0][:, [1, 3]], axis=1), draws["speed"], rtol=1e-12)
+    np.testing.assert_allclose(
+        np.linalg.norm(truth[0][:, [1, 3]], axis=1), draws["speed"], rtol=1e-12
+    )
     # closest approach within the encounter's duration (a slow tail chase may not get
     # there in 40 s); the run may end early only once the intruder recedes, after its CPA
     vv = np.einsum("bi,bi->b", v_rel, v_rel)

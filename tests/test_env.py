@@ -57,9 +57,7 @@ def test_render_test_on_aec_form():
 
 
 def test_max_cycles_test():
-    mod = types.SimpleNamespace(
-        parallel_env=lambda **kw: par(**kw), env=lambda **kw: aec(**kw)
-    )
+    mod = types.SimpleNamespace(parallel_env=lambda **kw: par(**kw), env=lambda **kw: aec(**kw))
     max_cycles_test(mod)
     # and the package itself (its default scenario) satisfies it too
     max_cycles_test(aenv)
@@ -137,8 +135,14 @@ def test_observations_stay_in_space_every_step():
     seen_track = False
     while env.agents:
         for a, o in obs.items():
-            assert env.observation_space(a).contains(o), (a, lay.names()[np.argmax(
-                (o < env.observation_space(a).low) | (o > env.observation_space(a).high))])
+            assert env.observation_space(a).contains(o), (
+                a,
+                lay.names()[
+                    np.argmax(
+                        (o < env.observation_space(a).low) | (o > env.observation_space(a).high)
+                    )
+                ],
+            )
             rows = lay.intruder_block(o)
             seen_track |= bool(rows[:, 0].sum() > 0)
             # padding rows are all zero, mask column is 0/1, tracks come first
@@ -276,8 +280,10 @@ def test_registered_with_pettingzoo():
 
 
 def test_env_import_does_not_import_pygame():
-    code = "import sys, airspace_sim.env; e = airspace_sim.env.parallel_env(); e.reset(); " \
-           "print('pygame' in sys.modules)"
+    code = (
+        "import sys, airspace_sim.env; e = airspace_sim.env.parallel_env(); e.reset(); "
+        "print('pygame' in sys.modules)"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
 
@@ -300,7 +306,9 @@ def test_scenario_object_overrides_and_agent_choice():
     from airspace_sim.scenarios import load
 
     sc = load("demo")
-    env = aenv.parallel_env(scenario=sc, overrides=["traffic.count=4"], agents=["markov2", "ring00"])
+    env = aenv.parallel_env(
+        scenario=sc, overrides=["traffic.count=4"], agents=["markov2", "ring00"]
+    )
     assert env.scenario.traffic.count == 4 and sc.traffic.count == 8  # the object is not changed
     assert env.possible_agents == ["markov2", "ring00"]
     _, infos = env.reset(seed=0)

@@ -8,8 +8,9 @@ import pytest
 from airspace_sim.env import spaces as sp
 from airspace_sim.errors import UserError
 
-LAYOUT = sp.ObservationLayout(n_intruders=3, n_modes=3, sensor_range=40000.0,
-                              r_safe=3000.0, lookahead=120.0)
+LAYOUT = sp.ObservationLayout(
+    n_intruders=3, n_modes=3, sensor_range=40000.0, r_safe=3000.0, lookahead=120.0
+)
 
 
 def test_layout_names_bounds_and_space():
@@ -50,8 +51,9 @@ def test_batch_matches_a_direct_computation():
         assert np.allclose(b[a, :, 8], cov[:, 0, 1] / np.sqrt(cov[:, 0, 0] * cov[:, 1, 1]))
         assert np.allclose(b[a, :, 11:], mu[slot == a][o])
         # single-ownship form agrees
-        one = sp.encode_intruders(LAYOUT, own_pos[a], own_vel[a], hd[a], r, P[slot == a],
-                                  mu[slot == a])
+        one = sp.encode_intruders(
+            LAYOUT, own_pos[a], own_vel[a], hd[a], r, P[slot == a], mu[slot == a]
+        )
         assert np.allclose(one, b[a])
 
 
@@ -59,8 +61,9 @@ def test_geometry_of_a_head_on_intruder():
     # ownship at the origin heading north at 200 m/s; intruder 10 km north heading south
     x = np.array([[0.0, 0.0, 10000.0, -200.0, 0.0]])
     P = np.diag([100.0**2, 1, 50.0**2, 1, 1e-6])[None]
-    rows = sp.encode_intruders(LAYOUT, np.zeros(2), np.array([0.0, 200.0]), math.pi / 2, x, P,
-                               np.array([[1.0, 0, 0]]))
+    rows = sp.encode_intruders(
+        LAYOUT, np.zeros(2), np.array([0.0, 200.0]), math.pi / 2, x, P, np.array([[1.0, 0, 0]])
+    )
     r = rows[0]
     assert np.allclose(r[1:3], [10000 / 40000, 0], atol=1e-12)  # dead ahead
     assert np.allclose(r[3:5], [-400 / 600, 0], atol=1e-12)  # closing

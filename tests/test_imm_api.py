@@ -318,8 +318,11 @@ def test_predict_modes_at_equals_every_step_prediction_sampled(preset):
     np.testing.assert_allclose(xs, ref_x, rtol=1e-9, atol=0)
     diag = np.sqrt(np.einsum("...ii->...i", ref_P))
     # covariances relative to the standard deviations (entries near 0 off the diagonal)
-    np.testing.assert_allclose(Ps / (diag[..., :, None] * diag[..., None, :]),
-                               ref_P / (diag[..., :, None] * diag[..., None, :]), atol=1e-9)
+    np.testing.assert_allclose(
+        Ps / (diag[..., :, None] * diag[..., None, :]),
+        ref_P / (diag[..., :, None] * diag[..., None, :]),
+        atol=1e-9,
+    )
     np.testing.assert_array_equal(Ps, np.swapaxes(Ps, -1, -2))
     all_x, _ = imm.predict_modes_at(steps)
     np.testing.assert_array_equal(all_x[rows], xs)

@@ -148,7 +148,9 @@ def test_predict_ahead_and_imm_view():
     np.testing.assert_allclose(Ps[0, 1], kf.P[0], rtol=1e-12)
     xm, Pm = kf.predict_modes(2)
     assert xm.shape == (1, 1, 2, 5) and Pm.shape == (1, 1, 2, 5, 5)
-    assert kf.mu.shape == (1, 1) and kf.x_modes.shape == (1, 1, 5) and kf.P_modes.shape == (1, 1, 5, 5)
+    assert (
+        kf.mu.shape == (1, 1) and kf.x_modes.shape == (1, 1, 5) and kf.P_modes.shape == (1, 1, 5, 5)
+    )
     x_at, P_at = kf.predict_modes_at([1, 4, 9], rows=[0])
     xs9, Ps9 = kf.predict_ahead(9)
     assert x_at.shape == (1, 1, 3, 5) and P_at.shape == (1, 1, 3, 5, 5)

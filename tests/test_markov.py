@@ -67,7 +67,10 @@ def test_two_state_chain_closed_form():
     for dt in (0.1, 1.0, 10.0, 300.0):
         e = math.exp(-(a + b) * dt)
         expect = np.array(
-            [[(b + a * e) / (a + b), a * (1 - e) / (a + b)], [b * (1 - e) / (a + b), (a + b * e) / (a + b)]]
+            [
+                [(b + a * e) / (a + b), a * (1 - e) / (a + b)],
+                [b * (1 - e) / (a + b), (a + b * e) / (a + b)],
+            ]
         )
         np.testing.assert_allclose(transition_matrix_from_sojourn([t0, t1], dt), expect, rtol=1e-12)
 
@@ -116,7 +119,10 @@ def test_changing_dt_keeps_sojourn_in_seconds():
     # stationary law of the continuous chain: time share ∝ τ_i × visit rate
     np.testing.assert_allclose(mu_ref, [0.75, 0.125, 0.125], rtol=1e-9)
     for dt in (0.01, 0.05, 0.5, 1.0, 2.0):
-        for p in (transition_matrix_from_sojourn(tau, dt, SWITCH), np.array(base.with_(dt=dt).transition_matrix)):
+        for p in (
+            transition_matrix_from_sojourn(tau, dt, SWITCH),
+            np.array(base.with_(dt=dt).transition_matrix),
+        ):
             mean_s = dt / (1 - np.diag(p))
             np.testing.assert_allclose(mean_s - tau, c * dt, rtol=0.05)
             assert np.all(np.abs(mean_s / tau - 1) < 0.07)
@@ -192,13 +198,17 @@ class _FixedUniforms:
 
 def test_sample_modes_never_draws_zero_probability_modes():
     # cumsum of this row is 0.9999999999999999 < 1: a u above it must not pick mode 3
-    Pi = np.array([[0.7, 0.2, 0.1, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0, 0, 0, 1.0]])
+    Pi = np.array(
+        [[0.7, 0.2, 0.1, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0, 0, 0, 1.0]]
+    )
     assert np.cumsum(Pi[0])[-2] < 1.0
     u = [0.0, 0.71, 0.9, 0.9999999999999999, np.nextafter(1.0, 0.0)]
     got = sample_modes(Pi, np.zeros(5, dtype=int), _FixedUniforms(u))
     np.testing.assert_array_equal(got, [0, 1, 2, 2, 2])
     # a leading zero-probability mode is never drawn, even for u = 0
-    got = sample_modes(Pi, np.ones(3, dtype=int), _FixedUniforms([0.0, 0.5, np.nextafter(1.0, 0.0)]))
+    got = sample_modes(
+        Pi, np.ones(3, dtype=int), _FixedUniforms([0.0, 0.5, np.nextafter(1.0, 0.0)])
+    )
     np.testing.assert_array_equal(got, [1, 1, 1])
 
 

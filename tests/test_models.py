@@ -64,7 +64,9 @@ OMEGAS = [math.pi / 4, -math.pi / 4, math.radians(3), -math.radians(1.1), 2.5, -
 @pytest.mark.parametrize("w", OMEGAS)
 @pytest.mark.parametrize("T", [0.1, 1.0, 4.5, 12.0])
 def test_ct_matches_closed_form(w, T):
-    np.testing.assert_allclose(transition(w, T), ct_closed_form(w, T), rtol=1e-12, atol=1e-12 * max(T, 1))
+    np.testing.assert_allclose(
+        transition(w, T), ct_closed_form(w, T), rtol=1e-12, atol=1e-12 * max(T, 1)
+    )
 
 
 def test_cv_is_paper_A1():
@@ -111,7 +113,9 @@ def test_small_turn_rate_tends_to_cv_without_nan(w):
         F = transition(w, T)
         assert np.all(np.isfinite(F))
         # Entries differ from CV by at most |ω|·max(T, T²/2) (sin ωT ≈ ωT, (1−cos ωT)/ω ≈ ωT²/2).
-        np.testing.assert_allclose(F, cv_closed_form(T), rtol=0, atol=abs(w) * max(T, T * T) + 1e-15)
+        np.testing.assert_allclose(
+            F, cv_closed_form(T), rtol=0, atol=abs(w) * max(T, T * T) + 1e-15
+        )
         # And the first-order term is right: (1 − cos ωT)/ω ≈ ωT²/2.
         np.testing.assert_allclose(F[2, 1], w * T * T / 2, rtol=1e-6, atol=1e-320)
         np.testing.assert_allclose(F[0, 3], -w * T * T / 2, rtol=1e-6, atol=1e-320)
@@ -122,7 +126,9 @@ def test_ct_converges_to_cv_continuously():
     ws = np.logspace(-1, -9, 9)
     err = np.abs(transition(ws, T) - cv_closed_form(T)).max(axis=(-1, -2))
     assert np.all(np.diff(err) < 0)  # monotone in ω
-    np.testing.assert_allclose(err / ws, max(T, T * T / 2), rtol=0.2)  # sin ωT ≈ ωT, (1−cos)/ω ≈ ωT²/2
+    np.testing.assert_allclose(
+        err / ws, max(T, T * T / 2), rtol=0.2
+    )  # sin ωT ≈ ωT, (1−cos)/ω ≈ ωT²/2
 
 
 @pytest.mark.parametrize("w", [math.radians(3), -math.radians(3), math.pi / 4, -0.5])

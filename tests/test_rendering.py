@@ -52,9 +52,11 @@ def test_aircraft_points_along_heading():
     east = Renderer(200, 200, view=view).render(one_aircraft(headings=np.array([0.0])))
     west = Renderer(200, 200, view=view).render(one_aircraft(headings=np.array([np.pi])))
     col = np.array(COLORS["traffic"], dtype=np.uint8)
+
     def centroid_x(f):
         ys, xs = np.nonzero(np.all(f[90:110, 90:110] == col, axis=2))
         return xs.mean()
+
     # the triangle's mass lies behind the nose: an east-pointing one has its centroid
     # left of the one pointing west
     assert centroid_x(east) < centroid_x(west)
@@ -74,8 +76,14 @@ def test_state_colours_and_frames_have_content():
         tracks=dict(
             owner=np.array([0, 0, 0]),
             intruder=np.array([1, 2, 3]),
-            x=np.array([[2000, -200, 50, 0, 0], [-15000, 100, 8000, 50, 0.02],
-                        [15000, 0, -9000, -200, -0.05.__float__()]], dtype=float),
+            x=np.array(
+                [
+                    [2000, -200, 50, 0, 0],
+                    [-15000, 100, 8000, 50, 0.02],
+                    [15000, 0, -9000, -200, -(0.05).__float__()],
+                ],
+                dtype=float,
+            ),
             P=np.tile(np.diag([300.0**2, 25, 300.0**2, 25, 1e-4]), (3, 1, 1)),
             mu=np.array([[0.8, 0.1, 0.1], [0.2, 0.7, 0.1], [0.1, 0.1, 0.8]]),
         ),
@@ -84,7 +92,7 @@ def test_state_colours_and_frames_have_content():
     frame = r.render(snap)
     assert frame.shape == (800, 800, 3)
     assert frame.std() > 5
-    colours = {tuple(c) for c in frame.reshape(-1, 3)[:: 7]}
+    colours = {tuple(c) for c in frame.reshape(-1, 3)[::7]}
     assert len(colours) > 20
     flat = frame.reshape(-1, 3)
     for key in ("los", "conflict", "clear", "agent", "track"):

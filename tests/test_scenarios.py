@@ -408,8 +408,12 @@ def test_build_does_not_share_hand_placed_objects():
 
 
 def test_random_traffic_spawn_clear_s_keeps_every_pair_apart_for_that_long():
-    sc = from_dict({"name": "x", "traffic": {"pattern": "random", "count": 40,
-                                             "sector": 80000.0, "spawn_clear_s": 90.0}})
+    sc = from_dict(
+        {
+            "name": "x",
+            "traffic": {"pattern": "random", "count": 40, "sector": 80000.0, "spawn_clear_s": 90.0},
+        }
+    )
     aircraft = build_aircraft(sc, np.random.default_rng(3))
     p = np.array([a.position for a in aircraft])
     h = np.radians([a.heading_deg for a in aircraft])
@@ -421,8 +425,10 @@ def test_random_traffic_spawn_clear_s_keeps_every_pair_apart_for_that_long():
     i, j = np.triu_indices(len(aircraft), 1)
     assert d[:, i, j].min() > sc.separation.r_safe
     # without it, the same traffic density does start pairs in near-term conflict
-    plain = build_aircraft(dataclasses.replace(
-        sc, traffic=dataclasses.replace(sc.traffic, spawn_clear_s=0.0)), np.random.default_rng(3))
+    plain = build_aircraft(
+        dataclasses.replace(sc, traffic=dataclasses.replace(sc.traffic, spawn_clear_s=0.0)),
+        np.random.default_rng(3),
+    )
     p0 = np.array([a.position for a in plain])
     h0 = np.radians([a.heading_deg for a in plain])
     v0 = np.array([a.speed for a in plain])[:, None] * np.stack([np.cos(h0), np.sin(h0)], 1)
@@ -432,7 +438,16 @@ def test_random_traffic_spawn_clear_s_keeps_every_pair_apart_for_that_long():
 
 
 def test_random_traffic_spawn_clear_s_impossible_is_a_user_error():
-    sc = from_dict({"name": "x", "traffic": {"pattern": "random", "count": 60,
-                                             "sector": 30000.0, "spawn_clear_s": 600.0}})
+    sc = from_dict(
+        {
+            "name": "x",
+            "traffic": {
+                "pattern": "random",
+                "count": 60,
+                "sector": 30000.0,
+                "spawn_clear_s": 600.0,
+            },
+        }
+    )
     with pytest.raises(UserError, match=r"traffic\.spawn_clear_s.*600"):
         build_aircraft(sc, np.random.default_rng(0))

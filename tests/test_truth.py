@@ -26,7 +26,11 @@ def test_seeded_determinism_bit_for_bit(name):
     b = simulate(p, 50, 7, np.random.default_rng(42))
     c = simulate(p, 50, 7, np.random.default_rng(43))
     assert isinstance(a, Trajectories) and a.dt == p.dt
-    assert a.states.shape == (50, 7, 5) and a.modes.shape == (50, 7) and a.measurements.shape == (50, 7, 2)
+    assert (
+        a.states.shape == (50, 7, 5)
+        and a.modes.shape == (50, 7)
+        and a.measurements.shape == (50, 7, 2)
+    )
     for f in ("states", "modes", "measurements"):
         np.testing.assert_array_equal(getattr(a, f), getattr(b, f))
     assert not np.array_equal(a.measurements, c.measurements)
@@ -69,7 +73,9 @@ def test_straight_mode_is_a_straight_line_when_Q_is_zero(name):
     t = p.dt * np.arange(T)[:, None]
     v0 = tr.states[0][:, [1, 3]]
     pos = tr.states[..., [0, 2]]
-    np.testing.assert_allclose(pos, tr.states[0][None, :, [0, 2]] + t[..., None] * v0[None], rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(
+        pos, tr.states[0][None, :, [0, 2]] + t[..., None] * v0[None], rtol=1e-12, atol=1e-9
+    )
     np.testing.assert_array_equal(tr.states[..., [1, 3]], np.broadcast_to(v0, (T, B, 2)))
     assert np.all(tr.modes == 0) and np.all(tr.states[..., 4] == 0.0)
 
@@ -104,7 +110,7 @@ def test_mode_frequencies_match_stationary_law(start):
     mode0 = None if start == "stationary" else np.zeros(B, dtype=int)
     tr = simulate(p, T, B, np.random.default_rng(11), mode0=mode0)
     mu = p.mu0()
-    for k in ([0, T // 2, T - 1] if start == "stationary" else [T - 1]):
+    for k in [0, T // 2, T - 1] if start == "stationary" else [T - 1]:
         counts = np.bincount(tr.modes[k], minlength=3)
         assert stats.chisquare(counts, B * mu).pvalue > 1e-4, (k, counts / B, mu)
     # the time share over all steps too (correlated in time: a loose bound)
@@ -115,7 +121,9 @@ def test_mode_frequencies_match_stationary_law(start):
 def test_seed_preset_numbers():
     p = presets.get("seed")
     assert p.dt == 0.1 and p.turn_rates == (0.0, math.pi / 4, -math.pi / 4)
-    np.testing.assert_array_equal(p.transition_matrix, [[0.8, 0.1, 0.1], [0.19, 0.8, 0.01], [0.19, 0.01, 0.8]])
+    np.testing.assert_array_equal(
+        p.transition_matrix, [[0.8, 0.1, 0.1], [0.19, 0.8, 0.01], [0.19, 0.01, 0.8]]
+    )
     np.testing.assert_array_equal(p.process_noise, models.paper_process_noise())
     np.testing.assert_array_equal(p.mu0(), [1.0, 0.0, 0.0])
     assert p.speed_range == (presets.V_CRUISE, 2 * presets.V_CRUISE)
@@ -128,7 +136,9 @@ def test_preset_with_dt_rebuilds_continuous_time_numbers():
     r = presets.get("realistic")
     r2 = r.with_(dt=0.5)
     np.testing.assert_allclose(r2.process_noise, models.white_noise_acceleration(0.5, 0.5, 1e-4))
-    np.testing.assert_allclose(r2.filter_process_noise, models.white_noise_acceleration(1.0, 0.5, 1e-4))
+    np.testing.assert_allclose(
+        r2.filter_process_noise, models.white_noise_acceleration(1.0, 0.5, 1e-4)
+    )
     assert r2 == presets.get("realistic", dt=0.5) == presets.realistic(0.5)
     # an explicit per-step Q stays as given
     z = r.with_(process_noise=np.zeros((5, 5)))
@@ -149,7 +159,9 @@ def test_imm_arguments_shapes_and_mode_pinning():
             assert xp[4] == p.turn_rates[j]
             np.testing.assert_allclose(xp[:4], (models.transition(p.turn_rates[j], p.dt) @ x)[:4])
     mu = presets.get("realistic").mu0()
-    np.testing.assert_allclose(mu @ np.array(presets.get("realistic").transition_matrix), mu, atol=1e-12)
+    np.testing.assert_allclose(
+        mu @ np.array(presets.get("realistic").transition_matrix), mu, atol=1e-12
+    )
 
 
 @pytest.mark.parametrize(

@@ -19,44 +19,85 @@ from airspace_sim.world.benchmark import random_scenario
 
 
 def scenario(aircraft, resolver="none", tracker="imm", duration=300.0, seed=0, **sensor):
-    return Scenario(name="t", seed=seed, dt=1.0, duration=duration,
-                    separation=Separation(r_safe=3000.0),
-                    sensor=SensorSpec(**{"range": 40000.0, "sigma": 50.0, **sensor}),
-                    tracker=TrackerSpec(kind=tracker),
-                    resolver=ResolverSpec(kind=resolver, lookahead=120.0), aircraft=aircraft)
+    return Scenario(
+        name="t",
+        seed=seed,
+        dt=1.0,
+        duration=duration,
+        separation=Separation(r_safe=3000.0),
+        sensor=SensorSpec(**{"range": 40000.0, "sigma": 50.0, **sensor}),
+        tracker=TrackerSpec(kind=tracker),
+        resolver=ResolverSpec(kind=resolver, lookahead=120.0),
+        aircraft=aircraft,
+    )
 
 
 def head_on(resolver, tracker="imm", seed=0):
-    return scenario([
-        AircraftSpec(id="west", position=(-30000.0, 0.0), heading_deg=0.0, speed=230.0,
-                     autopilot="route", waypoints=[(60000.0, 0.0)]),
-        AircraftSpec(id="east", position=(30000.0, 0.0), heading_deg=180.0, speed=230.0,
-                     autopilot="route", waypoints=[(-60000.0, 0.0)]),
-    ], resolver=resolver, tracker=tracker, seed=seed)
+    return scenario(
+        [
+            AircraftSpec(
+                id="west",
+                position=(-30000.0, 0.0),
+                heading_deg=0.0,
+                speed=230.0,
+                autopilot="route",
+                waypoints=[(60000.0, 0.0)],
+            ),
+            AircraftSpec(
+                id="east",
+                position=(30000.0, 0.0),
+                heading_deg=180.0,
+                speed=230.0,
+                autopilot="route",
+                waypoints=[(-60000.0, 0.0)],
+            ),
+        ],
+        resolver=resolver,
+        tracker=tracker,
+        seed=seed,
+    )
 
 
 def markov_traffic(n=12, seed=1, resolver="none", tracker="imm"):
     rng = np.random.default_rng(seed)
-    return scenario([
-        AircraftSpec(id=f"M{i}", position=tuple(rng.uniform(-20000, 20000, 2)),
-                     heading_deg=float(rng.uniform(0, 360)), speed=230.0, autopilot="markov")
-        for i in range(n)
-    ], resolver=resolver, tracker=tracker, seed=seed)
+    return scenario(
+        [
+            AircraftSpec(
+                id=f"M{i}",
+                position=tuple(rng.uniform(-20000, 20000, 2)),
+                heading_deg=float(rng.uniform(0, 360)),
+                speed=230.0,
+                autopilot="markov",
+            )
+            for i in range(n)
+        ],
+        resolver=resolver,
+        tracker=tracker,
+        seed=seed,
+    )
 
 
 # ------------------------------------------------------------------ autopilots
 def test_straight_flies_straight_at_constant_speed():
-    sc = scenario([AircraftSpec(id="a", position=(100.0, -50.0), heading_deg=30.0, speed=200.0),
-                   AircraftSpec(id="b", position=(0.0, 90000.0), heading_deg=250.0, speed=120.0)])
+    sc = scenario(
+        [
+            AircraftSpec(id="a", position=(100.0, -50.0), heading_deg=30.0, speed=200.0),
+            AircraftSpec(id="b", position=(0.0, 90000.0), heading_deg=250.0, speed=120.0),
+        ]
+    )
     world = World(sc)
     for _ in range(100):
         world.step()
     t = world.time
     for k, (p0, h, v) in enumerate((((100.0, -50.0), 30.0, 200.0), ((0.0, 90000.0), 250.0, 120.0))):
-        expect = np.array(p0) + v * t * np.array([math.cos(math.radians(h)), math.sin(math.radians(h))])
+        expect = np.array(p0) + v * t * np.array(
+            [math.cos(math.radians(h)), math.sin(math.radians(h))]
+        )
         np.testing.assert_allclose(world.positions[k], expect, rtol=0, atol=1e-6)
         assert world.speeds[k] == v
-        assert math.isclose(world.headings[k], math.radians(h) - (2 * math.pi if h > 180 else 0), abs_tol=1e-12)
+        assert math.isclose(
+            world.headings[k], math.radians(h) - (2 * math.pi if h > 180 else 0), abs_tol=1e-12
+        )
 
 
 def test_turn_limit_never_exceeded_and_agents_are_clipped():
@@ -99,8 +140,19 @@ def test_controlled_nan_means_builtin_and_bad_actions_rejected():
 
 def test_route_autopilot_reaches_every_waypoint_then_leaves():
     wps = [(20000.0, 0.0), (20000.0, 20000.0), (-5000.0, 25000.0)]
-    sc = scenario([AircraftSpec(id="r", position=(0.0, 0.0), heading_deg=90.0, speed=200.0,
-                                autopilot="route", waypoints=wps)], duration=1000.0)
+    sc = scenario(
+        [
+            AircraftSpec(
+                id="r",
+                position=(0.0, 0.0),
+                heading_deg=90.0,
+                speed=200.0,
+                autopilot="route",
+                waypoints=wps,
+            )
+        ],
+        duration=1000.0,
+    )
     world = World(sc)
     best = np.full(3, np.inf)
     while world.active[0] and world.step_count < 1000:
@@ -124,7 +176,9 @@ def test_markov_modes_follow_the_chain_and_imm_recognises_them():
     frac = np.bincount(modes.ravel(), minlength=3) / modes.size
     assert 0.4 < frac[0] < 0.8
     # turns are flown at the mode's rate
-    np.testing.assert_allclose(world.turn_rates, np.array([0, 1, -1])[world.modes] * math.radians(3.0))
+    np.testing.assert_allclose(
+        world.turn_rates, np.array([0, 1, -1])[world.modes] * math.radians(3.0)
+    )
     m = world.metrics()
     assert m["mode_accuracy"] > 0.7  # well above always guessing "straight" (~0.6)
     assert m["track_rmse_m"] < 50.0  # below the raw measurement error (σ√2 ≈ 71 m)
@@ -138,12 +192,22 @@ def track_set(world):
 def test_tracks_start_on_second_detection_and_drop_after_misses():
     # own flies east; "close" keeps 10 km ahead; "in" closes from 60 km (enters 40 km range
     # at t = 50 s); "out" opens from 35 km (leaves at t = 100 s); "quiet" does not avoid.
-    sc = scenario([
-        AircraftSpec(id="own", position=(0.0, 0.0), heading_deg=0.0, speed=200.0),
-        AircraftSpec(id="close", position=(10000.0, 0.0), heading_deg=0.0, speed=200.0, avoid=False),
-        AircraftSpec(id="in", position=(60000.0, 1000.0), heading_deg=180.0, speed=200.0, avoid=False),
-        AircraftSpec(id="out", position=(-35000.0, -1000.0), heading_deg=180.0, speed=50.0, avoid=False),
-    ], drop_after_misses=3, duration=200.0)
+    sc = scenario(
+        [
+            AircraftSpec(id="own", position=(0.0, 0.0), heading_deg=0.0, speed=200.0),
+            AircraftSpec(
+                id="close", position=(10000.0, 0.0), heading_deg=0.0, speed=200.0, avoid=False
+            ),
+            AircraftSpec(
+                id="in", position=(60000.0, 1000.0), heading_deg=180.0, speed=200.0, avoid=False
+            ),
+            AircraftSpec(
+                id="out", position=(-35000.0, -1000.0), heading_deg=180.0, speed=50.0, avoid=False
+            ),
+        ],
+        drop_after_misses=3,
+        duration=200.0,
+    )
     world = World(sc)
     assert len(world.tracks) == 0  # one detection is not a track yet
     world.step()
@@ -265,9 +329,18 @@ def test_snapshot_keys_and_shapes():
     s = world.snapshot()
     n, p = world.n, len(world.tracks)
     assert p > 0
-    for key, shape in {"positions": (n, 2), "velocities": (n, 2), "headings": (n,),
-                       "in_los": (n,), "nmac": (n,), "conflict": (n,), "controlled": (n,),
-                       "active": (n,), "advice": (n,), "ids": (n,)}.items():
+    for key, shape in {
+        "positions": (n, 2),
+        "velocities": (n, 2),
+        "headings": (n,),
+        "in_los": (n,),
+        "nmac": (n,),
+        "conflict": (n,),
+        "controlled": (n,),
+        "active": (n,),
+        "advice": (n,),
+        "ids": (n,),
+    }.items():
         assert s[key].shape == shape, key
     tr = s["tracks"]
     assert tr["x"].shape == (p, 5) and tr["P"].shape == (p, 5, 5) and tr["mu"].shape == (p, 3)
@@ -304,9 +377,13 @@ def test_left_commitment_returns_right_once_the_right_is_clear():
     avoid = World(load("demo")).avoidance
     assert avoid.preference == "right"
     cand = np.radians([[10.0, -10.0, 20.0, -20.0]] * 3)  # (n, C): left +, right -
-    band = np.array([[True, True, False, False],    # committed left, right now clear
-                     [True, False, False, False],   # committed left, right still blocked
-                     [True, False, False, True]])   # committed right, nearest clear is left
+    band = np.array(
+        [
+            [True, True, False, False],  # committed left, right now clear
+            [True, False, False, False],  # committed left, right still blocked
+            [True, False, False, True],
+        ]
+    )  # committed right, nearest clear is left
     side = np.array([1.0, 1.0, -1.0])
     psi = np.zeros(3)
     conflict = np.ones(3, dtype=bool)
@@ -325,8 +402,9 @@ def test_demo_scenario_keeps_separation():
     assert m["min_separation_m"] > 3000.0
 
 
-@pytest.mark.parametrize("off_route_s, clear", [(0.0, False), (10.0, False), (15.0, True),
-                                                (30.0, True), (300.0, True)])
+@pytest.mark.parametrize(
+    "off_route_s, clear", [(0.0, False), (10.0, False), (15.0, True), (30.0, True), (300.0, True)]
+)
 def test_resume_margin_shrinks_over_resume_decay_s(off_route_s, clear):
     # An intruder keeps a constant 6000 m (same velocity). Clear radius r_safe·(1 + margin +
     # extra) with r_safe 3000, margin 0.1 and extra = 1.5·(1 − off/30): 7800 m at 0 s,
@@ -337,11 +415,17 @@ def test_resume_margin_shrinks_over_resume_decay_s(off_route_s, clear):
     sc = load("dense_random", ["resolver.resume_decay_s=30.0", "resolver.lookahead=120.0"])
     avoid = Avoidance(sc, dt=1.0)
     assert (avoid.resume_margin, avoid.margin, avoid.r_safe) == (1.5, 0.1, 3000.0)
-    enc = Encounters(np.array([0]), np.array([[0]]), np.array([[[0.0, 6000.0]]]),
-                     np.zeros((1, 1, 2)), np.array([[True]]))
+    enc = Encounters(
+        np.array([0]),
+        np.array([[0]]),
+        np.array([[[0.0, 6000.0]]]),
+        np.zeros((1, 1, 2)),
+        np.array([[True]]),
+    )
     velocities = np.array([[200.0, 0.0], [200.0, 0.0]])
-    got = avoid.resume_clear(enc, velocities, np.zeros(1), np.full(2, np.radians(3.0)),
-                             np.array([off_route_s, 0.0]))
+    got = avoid.resume_clear(
+        enc, velocities, np.zeros(1), np.full(2, np.radians(3.0)), np.array([off_route_s, 0.0])
+    )
     assert got.tolist() == [clear]
 
 
@@ -361,9 +445,16 @@ def test_dense_random_traffic_reaches_its_routes():
 def test_bands_probabilistic_gets_the_tracks_mode_predictions():
     from airspace_sim.scenarios import load
 
-    world = World(load("demo", ['resolver.kind="bands-probabilistic"',
-                                "resolver.probability_horizon_s=30.0",
-                                "resolver.probability_samples=3"]))
+    world = World(
+        load(
+            "demo",
+            [
+                'resolver.kind="bands-probabilistic"',
+                "resolver.probability_horizon_s=30.0",
+                "resolver.probability_samples=3",
+            ],
+        )
+    )
     seen = []
     resolve = world.avoidance.resolver.resolve
 
@@ -388,11 +479,16 @@ def test_bands_probabilistic_gets_the_tracks_mode_predictions():
     own = enc.owners[o]
     # the slot is the track of that ownship, at that relative position
     assert world.tracks.owner[row] == own
-    np.testing.assert_allclose(world.tracks.x[row, (0, 2)] - world.positions[own],
-                               enc.rel_position[o, k])
+    np.testing.assert_allclose(
+        world.tracks.x[row, (0, 2)] - world.positions[own], enc.rel_position[o, k]
+    )
     x0 = xm[row, 0]
-    expect = (np.array([x0[0], x0[2]])[None] + t[:, None] * np.array([x0[1], x0[3]])[None]
-              - world.positions[own] - t[:, None] * world.velocities[own])
+    expect = (
+        np.array([x0[0], x0[2]])[None]
+        + t[:, None] * np.array([x0[1], x0[3]])[None]
+        - world.positions[own]
+        - t[:, None] * world.velocities[own]
+    )
     np.testing.assert_allclose(xs[o, k, 0], expect, rtol=1e-9, atol=1e-6)
     assert np.all(np.diff(Ps[o, k, 0, :, 0, 0]) > 0)  # uncertainty grows ahead
 
@@ -402,11 +498,22 @@ def test_off_route_time_stays_zero_for_aircraft_that_never_leave_their_route():
     # as turning back (it used to let off_route_s grow and eat the resume clearance)
     from airspace_sim.scenarios import from_dict
 
-    aircraft = [{"id": f"a{i}", "position": [0.0, 20000.0 * i], "heading_deg": 33.0 + 50 * i,
-                 "speed": 230.0, "autopilot": "route",
-                 "waypoints": [[300000.0 * math.cos(math.radians(33.0 + 50 * i)),
-                                20000.0 * i + 300000.0 * math.sin(math.radians(33.0 + 50 * i))]]}
-                for i in range(4)]
+    aircraft = [
+        {
+            "id": f"a{i}",
+            "position": [0.0, 20000.0 * i],
+            "heading_deg": 33.0 + 50 * i,
+            "speed": 230.0,
+            "autopilot": "route",
+            "waypoints": [
+                [
+                    300000.0 * math.cos(math.radians(33.0 + 50 * i)),
+                    20000.0 * i + 300000.0 * math.sin(math.radians(33.0 + 50 * i)),
+                ]
+            ],
+        }
+        for i in range(4)
+    ]
     world = World(from_dict({"name": "apart", "aircraft": aircraft, "sensor": {"range": 5000.0}}))
     assert world.avoidance.overrides
     for _ in range(60):

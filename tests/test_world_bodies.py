@@ -19,16 +19,26 @@ def busy_scenario(n=30, side=30000.0, seed=3, nmac=1000.0, sensor_range=8000.0):
     """Markov pilots in a small square, no avoidance: many LoS, NMACs and range changes."""
     rng = np.random.default_rng(seed)
     aircraft = [
-        AircraftSpec(id=f"M{i}", position=tuple(rng.uniform(-side / 2, side / 2, 2)),
-                     heading_deg=float(rng.uniform(0, 360)), speed=float(rng.uniform(150, 250)),
-                     autopilot="markov")
+        AircraftSpec(
+            id=f"M{i}",
+            position=tuple(rng.uniform(-side / 2, side / 2, 2)),
+            heading_deg=float(rng.uniform(0, 360)),
+            speed=float(rng.uniform(150, 250)),
+            autopilot="markov",
+        )
         for i in range(n)
     ]
-    return Scenario(name="busy", seed=seed, dt=1.0, duration=120.0,
-                    separation=Separation(r_safe=3000.0, nmac=nmac),
-                    sensor=SensorSpec(range=sensor_range, sigma=50.0),
-                    tracker=TrackerSpec(kind="truth"), resolver=ResolverSpec(kind="none"),
-                    aircraft=aircraft)
+    return Scenario(
+        name="busy",
+        seed=seed,
+        dt=1.0,
+        duration=120.0,
+        separation=Separation(r_safe=3000.0, nmac=nmac),
+        sensor=SensorSpec(range=sensor_range, sigma=50.0),
+        tracker=TrackerSpec(kind="truth"),
+        resolver=ResolverSpec(kind="none"),
+        aircraft=aircraft,
+    )
 
 
 def brute_pairs(pos, radius, active=None):
@@ -88,14 +98,22 @@ def test_los_episodes_counted_from_begin_events():
 
 def test_boundary_is_strict():
     # two aircraft exactly r_safe apart are not in LoS; a hair closer they are
-    sp = Airspace(np.array([[0.0, 0.0], [3000.0, 0.0], [0.0, 10000.0], [2999.999, 10000.0]]),
-                  r_safe=3000.0, nmac=152.4, sensor_range=40000.0)
+    sp = Airspace(
+        np.array([[0.0, 0.0], [3000.0, 0.0], [0.0, 10000.0], [2999.999, 10000.0]]),
+        r_safe=3000.0,
+        nmac=152.4,
+        sensor_range=40000.0,
+    )
     assert set(zip(*[a.tolist() for a in sp.pair_arrays(LOS)])) == {(2, 3)}
 
 
 def test_removed_aircraft_leave_all_pairs():
-    sp = Airspace(np.array([[0.0, 0.0], [100.0, 0.0], [200.0, 0.0]]), r_safe=3000.0,
-                  nmac=152.4, sensor_range=40000.0)
+    sp = Airspace(
+        np.array([[0.0, 0.0], [100.0, 0.0], [200.0, 0.0]]),
+        r_safe=3000.0,
+        nmac=152.4,
+        sensor_range=40000.0,
+    )
     assert len(sp.pairs[LOS]) == 3 and len(sp.pairs[NMAC]) == 2
     sp.remove([1])
     assert sp.pair_arrays(LOS)[0].tolist() == [0] and sp.pair_arrays(LOS)[1].tolist() == [2]

@@ -169,8 +169,17 @@ def _cpa_kernel(vo, r, v, valid, psi, radius, lookahead_s):  # pragma: no cover 
 TURN_SEGMENT = float(np.radians(15.0))
 
 
-def cpa_min_ratio_turning(own_velocity, rel_position, rel_velocity, valid, candidates, radius,
-                          lookahead_s, turn_rate, segment=TURN_SEGMENT):
+def cpa_min_ratio_turning(
+    own_velocity,
+    rel_position,
+    rel_velocity,
+    valid,
+    candidates,
+    radius,
+    lookahead_s,
+    turn_rate,
+    segment=TURN_SEGMENT,
+):
     """:func:`cpa_min_ratio` with the ownship turning at ``turn_rate`` until ``ψ`` is reached.
 
     The ownship flies an arc of radius ``|v_o|/ω`` from its current heading to ``heading + ψ``
@@ -186,8 +195,7 @@ def cpa_min_ratio_turning(own_velocity, rel_position, rel_velocity, valid, candi
     v = np.ascontiguousarray(rel_velocity, dtype=float)
     psi = np.ascontiguousarray(candidates, dtype=float)
     radius = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, dtype=float), valid.shape))
-    w = np.ascontiguousarray(np.broadcast_to(np.asarray(turn_rate, dtype=float),
-                                             (vo.shape[0],)))
+    w = np.ascontiguousarray(np.broadcast_to(np.asarray(turn_rate, dtype=float), (vo.shape[0],)))
     return _cpa_turn_kernel(vo, r, v, valid, psi, radius, float(lookahead_s), w, float(segment))
 
 
@@ -353,8 +361,9 @@ def band_search(
     if turn_rate is None:
         ratio = cpa_min_ratio(vo, r, v, valid, np.where(usable, cand, 0.0), radius, lookahead_s)
     else:
-        ratio = cpa_min_ratio_turning(vo, r, v, valid, np.where(usable, cand, 0.0), radius,
-                                      lookahead_s, turn_rate)
+        ratio = cpa_min_ratio_turning(
+            vo, r, v, valid, np.where(usable, cand, 0.0), radius, lookahead_s, turn_rate
+        )
     ratio = np.where(usable, ratio, -np.inf)
     band = usable & (ratio >= 1.0 - CLEAR_TOLERANCE)
     rows = np.arange(n)

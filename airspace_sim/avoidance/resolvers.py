@@ -224,8 +224,9 @@ class BandsResolver:
             own_velocity, rel_position, rel_velocity, valid, max_heading_change
         )
         res = self._search(vo, r, v, valid, mx, self.r_safe, turn_rate)
-        return ResolverOutput(res.heading_change, res.conflict, res.candidates, res.band,
-                              min_ratio=res.min_ratio)
+        return ResolverOutput(
+            res.heading_change, res.conflict, res.candidates, res.band, min_ratio=res.min_ratio
+        )
 
 
 class ProbabilisticBandsResolver(BandsResolver):
@@ -261,7 +262,11 @@ class ProbabilisticBandsResolver(BandsResolver):
     ):
         if mode_predictions is None:
             return super().resolve(
-                own_velocity, rel_position, rel_velocity, valid, max_heading_change,
+                own_velocity,
+                rel_position,
+                rel_velocity,
+                valid,
+                max_heading_change,
                 turn_rate=turn_rate,
             )
         vo, r, v, valid, mx = _arrays(
@@ -279,7 +284,11 @@ class ProbabilisticBandsResolver(BandsResolver):
         threat = valid & (prob >= self.threshold)
         res = self._search(vo, r, v, threat, mx, self.r_safe, turn_rate)
         return ResolverOutput(
-            res.heading_change, threat.any(axis=-1), res.candidates, res.band, prob,
+            res.heading_change,
+            threat.any(axis=-1),
+            res.candidates,
+            res.band,
+            prob,
             res.min_ratio,
         )
 

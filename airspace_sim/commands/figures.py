@@ -7,9 +7,15 @@ HELP = "Write the paper's figures 4-7 and world-frame/false-detection figures as
 
 def add_arguments(parser) -> None:
     parser.add_argument("--out", default="out/figures", help="output folder (default out/figures)")
-    parser.add_argument("--seed", type=int, default=0, help="campaign seed of the encounters shown (default 0)")
-    parser.add_argument("--runs", type=int, default=100,
-                        help="encounters per setting in the false-detection comparison (default 100)")
+    parser.add_argument(
+        "--seed", type=int, default=0, help="campaign seed of the encounters shown (default 0)"
+    )
+    parser.add_argument(
+        "--runs",
+        type=int,
+        default=100,
+        help="encounters per setting in the false-detection comparison (default 100)",
+    )
 
 
 def run(args) -> int:

@@ -409,8 +409,11 @@ def load_checkpoint(path: Path, quiet: bool = True):
         raise UserError(f"--resume {path}: not an airspace-sim checkpoint")
     meta = record["meta"]
     if record.get("code") != code_fingerprint():
-        print(f"airspace-sim: warning: {path} was saved by other airspace_sim code; the resumed "
-              f"run may differ from an uninterrupted one", file=sys.stderr)
+        print(
+            f"airspace-sim: warning: {path} was saved by other airspace_sim code; the resumed "
+            f"run may differ from an uninterrupted one",
+            file=sys.stderr,
+        )
     if record.get("world") is not None:
         return pickle.loads(record["world"]), meta
     from tqdm import tqdm

@@ -14,7 +14,9 @@ from scipy.linalg import expm
 from airspace_sim.errors import UserError
 
 
-def validate_transition_matrix(Pi, name: str = "transition_matrix", atol: float = 1e-9) -> np.ndarray:
+def validate_transition_matrix(
+    Pi, name: str = "transition_matrix", atol: float = 1e-9
+) -> np.ndarray:
     """Check that ``Pi`` is a square, non-negative, row-stochastic matrix; return it as float.
 
     Raises :class:`UserError` naming ``name``, the offending row and its value.

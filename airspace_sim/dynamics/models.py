@@ -86,7 +86,9 @@ def paper_process_noise() -> np.ndarray:
     return np.diag([200.0, 0.1, 200.0, 0.1, 0.001])
 
 
-def white_noise_acceleration(sigma_accel: float, dt: float, sigma_turn_rate: float = 0.0) -> np.ndarray:
+def white_noise_acceleration(
+    sigma_accel: float, dt: float, sigma_turn_rate: float = 0.0
+) -> np.ndarray:
     """Discrete white-noise-acceleration process noise, shape ``(5, 5)``.
 
     Each horizontal axis gets ``σ_a² [[ΔT⁴/4, ΔT³/2], [ΔT³/2, ΔT²]]`` (Bar-Shalom et al. 2001,

@@ -82,7 +82,9 @@ class Preset:
             raise UserError(f"{where}: turn_rates must be finite rad/s, got {rates.tolist()}")
         set_("turn_rates", tuple(rates.tolist()))
         M = rates.size
-        Pi = markov.validate_transition_matrix(self.transition_matrix, f"{where}: transition_matrix")
+        Pi = markov.validate_transition_matrix(
+            self.transition_matrix, f"{where}: transition_matrix"
+        )
         if Pi.shape != (M, M):
             raise UserError(f"{where}: transition_matrix is {Pi.shape}, expected ({M}, {M})")
         set_("transition_matrix", _tup(Pi))
@@ -94,7 +96,9 @@ class Preset:
         set_("measurement_sigma", sigma)
         lo, hi = (float(v) for v in self.speed_range)
         if not (0 <= lo <= hi < math.inf):
-            raise UserError(f"{where}: speed_range must be 0 <= low <= high m/s, got {self.speed_range!r}")
+            raise UserError(
+                f"{where}: speed_range must be 0 <= low <= high m/s, got {self.speed_range!r}"
+            )
         set_("speed_range", (lo, hi))
         if self.initial_mode_probabilities is not None:
             mu = np.asarray(self.initial_mode_probabilities, dtype=float).reshape(-1)
@@ -175,16 +179,29 @@ class Preset:
         new = replace(self, **changes)
         derived = {}
         touched = set(changes)
-        if new.sojourn_s is not None and "transition_matrix" not in changes and touched & {
-            "dt", "sojourn_s", "switch_probabilities"
-        }:
+        if (
+            new.sojourn_s is not None
+            and "transition_matrix" not in changes
+            and touched & {"dt", "sojourn_s", "switch_probabilities"}
+        ):
             derived["transition_matrix"] = _tup(
-                markov.transition_matrix_from_sojourn(new.sojourn_s, new.dt, new.switch_probabilities)
+                markov.transition_matrix_from_sojourn(
+                    new.sojourn_s, new.dt, new.switch_probabilities
+                )
             )
-        for q_key, s_key in (("process_noise", "sigma_accel"), ("filter_process_noise", "filter_sigma_accel")):
+        for q_key, s_key in (
+            ("process_noise", "sigma_accel"),
+            ("filter_process_noise", "filter_sigma_accel"),
+        ):
             sig = getattr(new, s_key)
-            if sig is not None and q_key not in changes and touched & {"dt", s_key, "sigma_turn_rate"}:
-                derived[q_key] = _tup(models.white_noise_acceleration(sig, new.dt, new.sigma_turn_rate))
+            if (
+                sig is not None
+                and q_key not in changes
+                and touched & {"dt", s_key, "sigma_turn_rate"}
+            ):
+                derived[q_key] = _tup(
+                    models.white_noise_acceleration(sig, new.dt, new.sigma_turn_rate)
+                )
         return replace(new, **derived) if derived else new
 
 
@@ -196,7 +213,9 @@ def _check_covariance(Q, name: str) -> np.ndarray:
         raise UserError(f"{name}: must be symmetric")
     w = np.linalg.eigvalsh(Q)
     if w.min() < -1e-9 * max(1.0, abs(w).max()):
-        raise UserError(f"{name}: must be positive semi-definite (smallest eigenvalue {w.min():.3g})")
+        raise UserError(
+            f"{name}: must be positive semi-definite (smallest eigenvalue {w.min():.3g})"
+        )
     return Q
 
 

@@ -111,7 +111,11 @@ def simulate(
     states = np.empty((T, B, models.N_STATE))
     modes = np.empty((T, B), dtype=np.int64)
     x = initial_states(preset, B, rng) if x0 is None else np.array(x0, dtype=float)
-    q = rng.choice(len(rates), size=B, p=preset.mu0()) if mode0 is None else np.asarray(mode0, dtype=np.int64)
+    q = (
+        rng.choice(len(rates), size=B, p=preset.mu0())
+        if mode0 is None
+        else np.asarray(mode0, dtype=np.int64)
+    )
     x[:, models.TURN_RATE] = rates[q]
     states[0], modes[0] = x, q
     for k in range(1, T):

@@ -91,16 +91,28 @@ def run_unit(frame: str, resolver: str, seed: int, indices: list, config: dict):
     if frame == "relative":
         from airspace_sim.encounters.relative import oracle_relative, run_relative
 
-        m = oracle_relative(seed, indices, cfg) if resolver == ORACLE else run_relative(seed, indices, resolver, cfg).metrics
+        m = (
+            oracle_relative(seed, indices, cfg)
+            if resolver == ORACLE
+            else run_relative(seed, indices, resolver, cfg).metrics
+        )
     elif frame == "world":
         from airspace_sim.encounters.world_frame import oracle_world, run_world
 
-        m = oracle_world(seed, indices, cfg) if resolver == ORACLE else run_world(seed, indices, resolver, cfg).metrics
+        m = (
+            oracle_world(seed, indices, cfg)
+            if resolver == ORACLE
+            else run_world(seed, indices, resolver, cfg).metrics
+        )
     else:
         raise UserError(f"frame must be one of {', '.join(FRAMES)}, got {frame!r}")
     n = len(indices)
-    cols = {"seed": [int(seed)] * n, "encounter": [int(i) for i in indices], "resolver": [resolver] * n,
-            "frame": [frame] * n}
+    cols = {
+        "seed": [int(seed)] * n,
+        "encounter": [int(i) for i in indices],
+        "resolver": [resolver] * n,
+        "frame": [frame] * n,
+    }
     for name, kind in COLUMNS[4:]:
         v = m.get(name)
         if v is None:
@@ -155,7 +167,9 @@ def _read_parts(parts: Path):
     return pa.concat_tables([pq.read_table(f).cast(_schema()) for f in files])
 
 
-def plan_units(done: set, runs: int, resolvers: list[str], chunk_size: int) -> list[tuple[str, list[int]]]:
+def plan_units(
+    done: set, runs: int, resolvers: list[str], chunk_size: int
+) -> list[tuple[str, list[int]]]:
     """Units (resolver, encounter indices) still to run: missing encounters grouped by
     their aligned chunk ``i // chunk_size``, so a unit never mixes chunks."""
     units = []
@@ -231,15 +245,23 @@ def run_campaign(
         mpath.write_text(json.dumps(manifest, indent=1, sort_keys=True))
 
     existing = _read_parts(parts)
-    done = set(zip(existing.column("resolver").to_pylist(), existing.column("encounter").to_pylist()))
+    done = set(
+        zip(existing.column("resolver").to_pylist(), existing.column("encounter").to_pylist())
+    )
     units = plan_units(done, int(runs), resolvers, int(chunk_size))
     config = asdict(cfg)
     total = sum(len(ix) for _, ix in units)
 
     from tqdm import tqdm
 
-    bar = tqdm(total=total, desc=f"encounters ({frame})", unit="enc", disable=not progress or total == 0,
-               file=sys.stderr, smoothing=0.1)
+    bar = tqdm(
+        total=total,
+        desc=f"encounters ({frame})",
+        unit="enc",
+        disable=not progress or total == 0,
+        file=sys.stderr,
+        smoothing=0.1,
+    )
 
     def save(resolver, ix, cols):
         name = f"part-{_safe(resolver)}-{ix[0]:07d}-{ix[-1]:07d}.parquet"
@@ -254,10 +276,19 @@ def run_campaign(
             import multiprocessing as mp
 
             # one BLAS/numba thread per worker: the workers are the parallelism
-            for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+            for var in (
+                "OMP_NUM_THREADS",
+                "OPENBLAS_NUM_THREADS",
+                "MKL_NUM_THREADS",
+                "NUMBA_NUM_THREADS",
+            ):
                 os.environ.setdefault(var, "1")
-            with ProcessPoolExecutor(max_workers=int(workers), mp_context=mp.get_context("spawn")) as ex:
-                pending = {ex.submit(run_unit, frame, r, seed, ix, config): (r, ix) for r, ix in units}
+            with ProcessPoolExecutor(
+                max_workers=int(workers), mp_context=mp.get_context("spawn")
+            ) as ex:
+                pending = {
+                    ex.submit(run_unit, frame, r, seed, ix, config): (r, ix) for r, ix in units
+                }
                 while pending:
                     finished, _ = wait(pending, return_when=FIRST_COMPLETED)
                     for f in finished:
@@ -277,8 +308,10 @@ def assemble(out, runs: int, resolvers):
     out = Path(out)
     parts = out.with_name(out.name + ".parts")
     t = _read_parts(parts)
-    mask = pc.and_(pc.is_in(t.column("resolver"), value_set=pa.array(list(resolvers))),
-                   pc.less(t.column("encounter"), runs))
+    mask = pc.and_(
+        pc.is_in(t.column("resolver"), value_set=pa.array(list(resolvers))),
+        pc.less(t.column("encounter"), runs),
+    )
     t = t.filter(mask)
     keys = list(zip(t.column("resolver").to_pylist(), t.column("encounter").to_pylist()))
     if len(set(keys)) != len(keys):
@@ -315,30 +348,40 @@ def summarize(table) -> list[dict]:
             return float(np.nanmean(v)) if np.any(np.isfinite(v)) else math.nan
 
         los = col("los")
-        rows.append({
-            "resolver": name,
-            "frame": cols["frame"][int(np.flatnonzero(sel)[0])],
-            "runs": int(sel.sum()),
-            "los": int(los.sum()),
-            "los_rate": float(los.mean()),
-            "mean_intrusion": mean("intrusion_depth"),
-            "max_intrusion": float(np.nanmax(col("intrusion_depth"))),
-            "mean_min_sep_m": mean("min_separation_m"),
-            "mean_heading_change_deg": math.degrees(mean("heading_change_rad")),
-            "mean_manoeuvres": mean("n_manoeuvres"),
-            "position_rmse_m": mean("position_rmse_m"),
-            "measurement_rmse_m": mean("measurement_rmse_m"),
-            "mode_accuracy": mean("mode_accuracy"),
-            "straight_fraction": mean("true_straight_fraction"),
-            "false_det_rate_own_turn": ratio("false_detections", "own_turn_straight_steps"),
-            "false_det_rate_quiet": ratio("quiet_false_detections", "quiet_straight_steps"),
-            "world_false_det_rate_own_turn": ratio("world_false_detections", "world_own_turn_straight_steps"),
-            "rel_false_det_rate_own_turn": ratio("rel_false_detections", "rel_own_turn_straight_steps"),
-            "world_false_det_rate_quiet": ratio("world_quiet_false_detections", "world_quiet_straight_steps"),
-            "rel_false_det_rate_quiet": ratio("rel_quiet_false_detections", "rel_quiet_straight_steps"),
-            "world_position_rmse_m": mean("world_position_rmse_m"),
-            "rel_position_rmse_m": mean("rel_position_rmse_m"),
-        })
+        rows.append(
+            {
+                "resolver": name,
+                "frame": cols["frame"][int(np.flatnonzero(sel)[0])],
+                "runs": int(sel.sum()),
+                "los": int(los.sum()),
+                "los_rate": float(los.mean()),
+                "mean_intrusion": mean("intrusion_depth"),
+                "max_intrusion": float(np.nanmax(col("intrusion_depth"))),
+                "mean_min_sep_m": mean("min_separation_m"),
+                "mean_heading_change_deg": math.degrees(mean("heading_change_rad")),
+                "mean_manoeuvres": mean("n_manoeuvres"),
+                "position_rmse_m": mean("position_rmse_m"),
+                "measurement_rmse_m": mean("measurement_rmse_m"),
+                "mode_accuracy": mean("mode_accuracy"),
+                "straight_fraction": mean("true_straight_fraction"),
+                "false_det_rate_own_turn": ratio("false_detections", "own_turn_straight_steps"),
+                "false_det_rate_quiet": ratio("quiet_false_detections", "quiet_straight_steps"),
+                "world_false_det_rate_own_turn": ratio(
+                    "world_false_detections", "world_own_turn_straight_steps"
+                ),
+                "rel_false_det_rate_own_turn": ratio(
+                    "rel_false_detections", "rel_own_turn_straight_steps"
+                ),
+                "world_false_det_rate_quiet": ratio(
+                    "world_quiet_false_detections", "world_quiet_straight_steps"
+                ),
+                "rel_false_det_rate_quiet": ratio(
+                    "rel_quiet_false_detections", "rel_quiet_straight_steps"
+                ),
+                "world_position_rmse_m": mean("world_position_rmse_m"),
+                "rel_position_rmse_m": mean("rel_position_rmse_m"),
+            }
+        )
     return rows
 
 
@@ -349,24 +392,49 @@ def _fmt(v, spec):
 def format_summary(rows: list[dict], markdown: bool = False) -> str:
     """The summary as an aligned text table (or a markdown table)."""
     world = any(r["frame"] == "world" for r in rows)
-    head = ["resolver", "frame", "runs", "LoS", "LoS rate", "mean depth", "max depth", "mean hdg chg (deg)",
-            "mean manoeuvres", "pos RMSE (m)", "meas RMSE (m)", "mode acc"]
+    head = [
+        "resolver",
+        "frame",
+        "runs",
+        "LoS",
+        "LoS rate",
+        "mean depth",
+        "max depth",
+        "mean hdg chg (deg)",
+        "mean manoeuvres",
+        "pos RMSE (m)",
+        "meas RMSE (m)",
+        "mode acc",
+    ]
     if world:
         head += ["false det. own turn: world / rel trk", "false det. otherwise: world / rel trk"]
     else:
         head += ["false det. own turn / otherwise"]
     body = []
     for r in rows:
-        line = [r["resolver"], r["frame"], str(r["runs"]), str(r["los"]), _fmt(r["los_rate"], ".4f"),
-                _fmt(r["mean_intrusion"], ".4f"), _fmt(r["max_intrusion"], ".4f"),
-                _fmt(r["mean_heading_change_deg"], ".1f"), _fmt(r["mean_manoeuvres"], ".1f"),
-                _fmt(r["position_rmse_m"], ".1f"), _fmt(r["measurement_rmse_m"], ".1f"),
-                _fmt(r["mode_accuracy"], ".3f")]
+        line = [
+            r["resolver"],
+            r["frame"],
+            str(r["runs"]),
+            str(r["los"]),
+            _fmt(r["los_rate"], ".4f"),
+            _fmt(r["mean_intrusion"], ".4f"),
+            _fmt(r["max_intrusion"], ".4f"),
+            _fmt(r["mean_heading_change_deg"], ".1f"),
+            _fmt(r["mean_manoeuvres"], ".1f"),
+            _fmt(r["position_rmse_m"], ".1f"),
+            _fmt(r["measurement_rmse_m"], ".1f"),
+            _fmt(r["mode_accuracy"], ".3f"),
+        ]
         if world:
-            line += [f"{_fmt(r['world_false_det_rate_own_turn'], '.3f')} / {_fmt(r['rel_false_det_rate_own_turn'], '.3f')}",
-                     f"{_fmt(r['world_false_det_rate_quiet'], '.3f')} / {_fmt(r['rel_false_det_rate_quiet'], '.3f')}"]
+            line += [
+                f"{_fmt(r['world_false_det_rate_own_turn'], '.3f')} / {_fmt(r['rel_false_det_rate_own_turn'], '.3f')}",
+                f"{_fmt(r['world_false_det_rate_quiet'], '.3f')} / {_fmt(r['rel_false_det_rate_quiet'], '.3f')}",
+            ]
         else:
-            line += [f"{_fmt(r['false_det_rate_own_turn'], '.3f')} / {_fmt(r['false_det_rate_quiet'], '.3f')}"]
+            line += [
+                f"{_fmt(r['false_det_rate_own_turn'], '.3f')} / {_fmt(r['false_det_rate_quiet'], '.3f')}"
+            ]
         body.append(line)
     if markdown:
         out = ["| " + " | ".join(head) + " |", "|" + "|".join(" --- " for _ in head) + "|"]
@@ -393,25 +461,45 @@ def oracle_breakdown(table) -> list[dict]:
     for name in dict.fromkeys(cols["resolver"]):
         if name == ORACLE:
             continue
-        pairs = [(e, l) for r, e, l in zip(cols["resolver"], cols["encounter"], cols["los"])
-                 if r == name and e in orc]
+        pairs = [
+            (e, l)
+            for r, e, l in zip(cols["resolver"], cols["encounter"], cols["los"])
+            if r == name and e in orc
+        ]
         los = [e for e, l in pairs if l]
-        out.append({
-            "resolver": name,
-            "runs": len(pairs),
-            "unavoidable": sum(orc[e] for e, _ in pairs),
-            "los": len(los),
-            "los_unavoidable": sum(orc[e] for e in los),
-            "los_avoidable": sum(not orc[e] for e in los),
-        })
+        out.append(
+            {
+                "resolver": name,
+                "runs": len(pairs),
+                "unavoidable": sum(orc[e] for e, _ in pairs),
+                "los": len(los),
+                "los_unavoidable": sum(orc[e] for e in los),
+                "los_avoidable": sum(not orc[e] for e in los),
+            }
+        )
     return out
 
 
 def format_oracle_breakdown(rows: list[dict], markdown: bool = False) -> str:
-    head = ["resolver", "runs", "oracle: unavoidable", "LoS", "LoS also unavoidable for the oracle",
-            "LoS the oracle avoided"]
-    body = [[r["resolver"], str(r["runs"]), f"{r['unavoidable']} ({r['unavoidable'] / max(r['runs'], 1):.2%})",
-             str(r["los"]), str(r["los_unavoidable"]), str(r["los_avoidable"])] for r in rows]
+    head = [
+        "resolver",
+        "runs",
+        "oracle: unavoidable",
+        "LoS",
+        "LoS also unavoidable for the oracle",
+        "LoS the oracle avoided",
+    ]
+    body = [
+        [
+            r["resolver"],
+            str(r["runs"]),
+            f"{r['unavoidable']} ({r['unavoidable'] / max(r['runs'], 1):.2%})",
+            str(r["los"]),
+            str(r["los_unavoidable"]),
+            str(r["los_avoidable"]),
+        ]
+        for r in rows
+    ]
     if markdown:
         out = ["| " + " | ".join(head) + " |", "|" + "|".join(" --- " for _ in head) + "|"]
         return "\n".join(out + ["| " + " | ".join(b) + " |" for b in body])

@@ -46,8 +46,15 @@ def _plt():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    plt.rcParams.update({"font.size": 11, "axes.titlesize": 12, "axes.labelsize": 11,
-                         "legend.fontsize": 9, "figure.dpi": 100})
+    plt.rcParams.update(
+        {
+            "font.size": 11,
+            "axes.titlesize": 12,
+            "axes.labelsize": 11,
+            "legend.fontsize": 9,
+            "figure.dpi": 100,
+        }
+    )
     return plt
 
 
@@ -67,7 +74,9 @@ def pick_encounter(batch, min_manoeuvres: int = 3) -> int:
     and an intruder turn, else the one with the most rotations."""
     m = batch.metrics
     tr = batch.trace
-    turned = np.array([(tr["mode"][tr["active"][:, b], b] != 0).any() for b in range(len(batch.indices))])
+    turned = np.array(
+        [(tr["mode"][tr["active"][:, b], b] != 0).any() for b in range(len(batch.indices))]
+    )
     ok = np.flatnonzero((m["n_manoeuvres"] >= min_manoeuvres) & turned & (m["steps"] > 80))
     return int(ok[0]) if ok.size else int(np.argmax(m["n_manoeuvres"]))
 
@@ -76,9 +85,17 @@ def fig4(batch, path, cfg: EncounterConfig):
     plt = _plt()
     tr = batch.trace
     fig, ax = plt.subplots(figsize=(7.5, 7.5))
-    _circle(ax, cfg.r_safe / 1e3, color="red", lw=2, label=f"safety circle R = {cfg.r_safe / 1e3:g} km")
-    _circle(ax, cfg.start_radius / 1e3, color="gray", ls="--", lw=1.2,
-            label=f"start circle {cfg.start_radius / 1e3:g} km")
+    _circle(
+        ax, cfg.r_safe / 1e3, color="red", lw=2, label=f"safety circle R = {cfg.r_safe / 1e3:g} km"
+    )
+    _circle(
+        ax,
+        cfg.start_radius / 1e3,
+        color="gray",
+        ls="--",
+        lw=1.2,
+        label=f"start circle {cfg.start_radius / 1e3:g} km",
+    )
     for b in range(len(batch.indices)):
         xy = _valid(tr, "truth", b)[:, [0, 2]] / 1e3
         los = batch.metrics["los"][b]
@@ -89,8 +106,10 @@ def fig4(batch, path, cfg: EncounterConfig):
     ax.plot([], [], "o", color="k", ms=4, label="start")
     ax.plot(0, 0, marker="^", color="k", ms=10, ls="none", label="ownship (origin)")
     n_los = int(batch.metrics["los"].sum())
-    ax.set_title(f"Fig. 4 counterpart: {len(batch.indices)} relative-frame encounters, paper's CDA\n"
-                 f"({n_los} with loss of separation, min separation {batch.metrics['min_separation_m'].min():.0f} m)")
+    ax.set_title(
+        f"Fig. 4 counterpart: {len(batch.indices)} relative-frame encounters, paper's CDA\n"
+        f"({n_los} with loss of separation, min separation {batch.metrics['min_separation_m'].min():.0f} m)"
+    )
     ax.set_xlabel("relative east x (km)")
     ax.set_ylabel("relative north y (km)")
     ax.set_aspect("equal")
@@ -122,7 +141,13 @@ def fig5(batch, b, path):
     rot = _rotation_times(tr, b)
     for k, tt in enumerate(rot):
         for ax in (a1, a2):
-            ax.axvspan(tt, tt + batch.dt, color="0.8", lw=0, label="ownship rotation θ ≠ 0" if (k == 0 and ax is a1) else None)
+            ax.axvspan(
+                tt,
+                tt + batch.dt,
+                color="0.8",
+                lw=0,
+                label="ownship rotation θ ≠ 0" if (k == 0 and ax is a1) else None,
+            )
     a1.set_ylabel("mode probability")
     a1.set_ylim(-0.02, 1.25)
     a1.set_title(f"Fig. 5 counterpart (encounter {batch.indices[b]}): (a) IMM mode probabilities")
@@ -164,15 +189,29 @@ def fig6(batch, b, path, cfg: EncounterConfig):
         if unsafe[k].any():
             j = int(np.argmax(unsafe[k]))
             ax.plot(est[k, 0], est[k, 1], "+", color="red", ms=11, mew=1.8)
-            ax.plot(pred[k, j, 0], pred[k, j, 1], "+", color="darkred", ms=11, mew=1.8,
-                    label="estimate B and its unsafe prediction C_j" if first else None)
+            ax.plot(
+                pred[k, j, 0],
+                pred[k, j, 1],
+                "+",
+                color="darkred",
+                ms=11,
+                mew=1.8,
+                label="estimate B and its unsafe prediction C_j" if first else None,
+            )
             ax.plot([est[k, 0], pred[k, j, 0]], [est[k, 1], pred[k, j, 1]], color="red", lw=0.8)
             first = False
     sw = np.flatnonzero(np.diff(mode) != 0) + 1
     for m in range(3):
         s = sw[mode[sw] == m]
-        ax.plot(xy[s, 0], xy[s, 1], "*", ms=7, color=MODE_COLORS[m], ls="none",
-                label=f"intruder switches to mode {MODE_NAMES[m]}")
+        ax.plot(
+            xy[s, 0],
+            xy[s, 1],
+            "*",
+            ms=7,
+            color=MODE_COLORS[m],
+            ls="none",
+            label=f"intruder switches to mode {MODE_NAMES[m]}",
+        )
     ax.plot(xy[0, 0], xy[0, 1], "o", color="k", ms=6, label="start")
     # zoom on the track (the ownship is at the origin, R = 3 km away)
     pad = 0.3
@@ -180,9 +219,11 @@ def fig6(batch, b, path, cfg: EncounterConfig):
     ax.set_ylim(xy[:, 1].min() - pad, xy[:, 1].max() + pad)
     ax.set_aspect("equal")
     ms = batch.metrics["min_separation_m"][b]
-    ax.set_title(f"Fig. 6 counterpart (encounter {batch.indices[b]}): relative track near the safety circle\n"
-                 f"min separation {ms:.0f} m, {int(batch.metrics['n_manoeuvres'][b])} frame rotations "
-                 "(ownship at the origin, off the plot)")
+    ax.set_title(
+        f"Fig. 6 counterpart (encounter {batch.indices[b]}): relative track near the safety circle\n"
+        f"min separation {ms:.0f} m, {int(batch.metrics['n_manoeuvres'][b])} frame rotations "
+        "(ownship at the origin, off the plot)"
+    )
     ax.set_xlabel("relative east x (km)")
     ax.set_ylabel("relative north y (km)")
     ax.grid(alpha=0.3)
@@ -205,16 +246,30 @@ def fig7(batch, b, path):
     for ax, (name, si, zi) in zip(axes, [("x", 0, 0), ("y", 2, 1)]):
         me = z[:, zi] - truth[:, si]
         ee = est[:, si] - truth[:, si]
-        ax.plot(t, me, color="0.55", lw=1.0, label=f"measurement error (RMS {np.sqrt(np.mean(me**2)):.0f} m)")
-        ax.plot(t, ee, color="tab:blue", lw=1.6, label=f"estimation error (RMS {np.sqrt(np.mean(ee**2)):.0f} m)")
+        ax.plot(
+            t,
+            me,
+            color="0.55",
+            lw=1.0,
+            label=f"measurement error (RMS {np.sqrt(np.mean(me**2)):.0f} m)",
+        )
+        ax.plot(
+            t,
+            ee,
+            color="tab:blue",
+            lw=1.6,
+            label=f"estimation error (RMS {np.sqrt(np.mean(ee**2)):.0f} m)",
+        )
         for tt in _rotation_times(tr, b):
             ax.axvline(tt, color="tab:orange", lw=0.6, alpha=0.6)
         ax.axhline(0, color="k", lw=0.6)
         ax.set_ylabel(f"error in {name} (m)")
         ax.legend(loc="upper right")
         ax.grid(alpha=0.3)
-    axes[0].set_title(f"Fig. 7 counterpart (encounter {batch.indices[b]}): (a) x, (b) y  "
-                      "(orange lines: ownship frame rotations)")
+    axes[0].set_title(
+        f"Fig. 7 counterpart (encounter {batch.indices[b]}): (a) x, (b) y  "
+        "(orange lines: ownship frame rotations)"
+    )
     axes[1].set_xlabel("time (s)")
     fig.tight_layout()
     fig.savefig(path)
@@ -234,18 +289,31 @@ def world_figure(wb, b, path, cfg: EncounterConfig, resolver: str, baseline=None
         okb = baseline.trace["active"][:, b]
         okb = okb & (np.arange(okb.size) < ok.sum())  # same time span as the avoiding run (a copy)
         ob = baseline.trace["own"][okb, b][:, [0, 2]] / 1e3
-        ax.plot(ob[:, 0], ob[:, 1], color="tab:blue", lw=1.2, ls=":",
-                label=f"ownship without avoidance (same time span; min sep {baseline.metrics['min_separation_m'][b]:.0f} m)")
+        ax.plot(
+            ob[:, 0],
+            ob[:, 1],
+            color="tab:blue",
+            lw=1.2,
+            ls=":",
+            label=f"ownship without avoidance (same time span; min sep {baseline.metrics['min_separation_m'][b]:.0f} m)",
+        )
     ax.plot(own[:, 0], own[:, 1], color="tab:blue", lw=2, label="ownship with avoidance")
     ax.plot(intr[:, 0], intr[:, 1], color="tab:red", lw=2, label="intruder (true)")
     est = tr["estimate"][ok, b][:, [0, 2]] / 1e3
-    ax.plot(est[:, 0], est[:, 1], color="tab:red", lw=1, ls="--", label="intruder (world-frame IMM)")
+    ax.plot(
+        est[:, 0], est[:, 1], color="tab:red", lw=1, ls="--", label="intruder (world-frame IMM)"
+    )
     marks = np.arange(0, len(t), max(1, int(round(2.0 / wb.dt))))
     _c = np.linspace(0, 2 * np.pi, 100)
     for k in marks:
         ax.plot([own[k, 0], intr[k, 0]], [own[k, 1], intr[k, 1]], color="0.6", lw=0.8)
-        ax.plot(own[k, 0] + cfg.r_safe / 1e3 * np.cos(_c), own[k, 1] + cfg.r_safe / 1e3 * np.sin(_c),
-                color="tab:blue", lw=0.5, alpha=0.45)
+        ax.plot(
+            own[k, 0] + cfg.r_safe / 1e3 * np.cos(_c),
+            own[k, 1] + cfg.r_safe / 1e3 * np.sin(_c),
+            color="tab:blue",
+            lw=0.5,
+            alpha=0.45,
+        )
         ax.annotate(f"{t[k]:.0f} s", intr[k], fontsize=8, color="tab:red")
     ax.plot([], [], color="tab:blue", lw=0.5, label="safety circle, every 2 s")
     ax.plot([], [], color="0.6", lw=0.8, label="line of sight, every 2 s")
@@ -256,22 +324,35 @@ def world_figure(wb, b, path, cfg: EncounterConfig, resolver: str, baseline=None
     ax.set_ylabel("north (km)")
     ax.grid(alpha=0.3)
     ax.legend(loc="upper left", bbox_to_anchor=(0.0, -0.12), fontsize=8, ncol=2)
-    ax.set_title(f"World frame, resolver '{resolver}' (encounter {wb.indices[b]}),\n"
-                 f"turn-rate limit {math.degrees(cfg.max_turn_rate):.0f} deg/s")
+    ax.set_title(
+        f"World frame, resolver '{resolver}' (encounter {wb.indices[b]}),\n"
+        f"turn-rate limit {math.degrees(cfg.max_turn_rate):.0f} deg/s"
+    )
     a2 = fig.add_subplot(2, 2, 2)
     hdg = np.degrees(np.unwrap(np.arctan2(tr["own"][ok, b, 3], tr["own"][ok, b, 1])))
     a2.plot(t, hdg - hdg[0], color="tab:blue", lw=1.8, label="ownship heading change from start")
     a2.set_ylabel("heading change (deg)")
     a2.grid(alpha=0.3)
     a2.legend(loc="best", fontsize=8)
-    a2.set_title(f"total |heading change| {np.degrees(wb.metrics['heading_change_rad'][b]):.0f} deg "
-                 f"in {int(wb.metrics['n_manoeuvres'][b])} steps", fontsize=10)
+    a2.set_title(
+        f"total |heading change| {np.degrees(wb.metrics['heading_change_rad'][b]):.0f} deg "
+        f"in {int(wb.metrics['n_manoeuvres'][b])} steps",
+        fontsize=10,
+    )
     a3 = fig.add_subplot(2, 2, 4, sharex=a2)
     sep = np.hypot(*(tr["intruder"][ok, b][:, [0, 2]] - tr["own"][ok, b][:, [0, 2]]).T) / 1e3
     if baseline is not None:
         okb = baseline.trace["active"][:, b]
         tb = baseline.trace["time"][okb]
-        sb = np.hypot(*(baseline.trace["intruder"][okb, b][:, [0, 2]] - baseline.trace["own"][okb, b][:, [0, 2]]).T) / 1e3
+        sb = (
+            np.hypot(
+                *(
+                    baseline.trace["intruder"][okb, b][:, [0, 2]]
+                    - baseline.trace["own"][okb, b][:, [0, 2]]
+                ).T
+            )
+            / 1e3
+        )
         a3.plot(tb, sb, color="k", lw=1.2, ls=":", label="without avoidance")
     a3.plot(t, sep, color="k", lw=1.8, label="with avoidance")
     a3.axhline(cfg.r_safe / 1e3, color="red", lw=1.5, label="R_safe")
@@ -298,13 +379,16 @@ def false_detection_figure(wb, b, rates: dict, path, n_runs: int):
     for k in np.flatnonzero(turning):
         a1.axvspan(t[k] - wb.dt, t[k], color="0.85", lw=0)
     a1.plot([], [], color="0.85", lw=8, label="ownship turning")
-    for key, color, name in (("mu_rel", "tab:red", "relative-frame tracker (paper)"),
-                             ("mu", "tab:blue", "world-frame tracker")):
+    for key, color, name in (
+        ("mu_rel", "tab:red", "relative-frame tracker (paper)"),
+        ("mu", "tab:blue", "world-frame tracker"),
+    ):
         mu = tr[key][ok, b]
         a1.plot(t, np.maximum(mu[:, 1], mu[:, 2]) - mu[:, 0], color=color, lw=1.3, label=name)
     straight = tr["mode"][ok, b] == 0
-    a1.fill_between(t, -0.6, -0.55, where=~straight, step="pre", color="k", lw=0,
-                    label="intruder truly turning")
+    a1.fill_between(
+        t, -0.6, -0.55, where=~straight, step="pre", color="k", lw=0, label="intruder truly turning"
+    )
     a1.axhline(0, color="k", lw=0.8)
     a1.set_xlabel("time (s)")
     a1.set_ylabel("turn evidence max(μ2, μ3) − μ1")
@@ -363,13 +447,16 @@ def make_all(out_dir, seed: int = 0, n_tracks: int = 15, n_false_runs: int = 100
     rates = {
         "paper's relative frame\n(rotation ≤ 45°/step)": (
             _rate(rel, "false_detections", "own_turn_straight_steps"),
-            _rate(rel, "quiet_false_detections", "quiet_straight_steps")),
+            _rate(rel, "quiet_false_detections", "quiet_straight_steps"),
+        ),
         "world frame,\nrelative-frame tracker": (
             _rate(m, "rel_false_detections", "rel_own_turn_straight_steps"),
-            _rate(m, "rel_quiet_false_detections", "rel_quiet_straight_steps")),
+            _rate(m, "rel_quiet_false_detections", "rel_quiet_straight_steps"),
+        ),
         "world frame,\nworld-frame tracker": (
             _rate(m, "world_false_detections", "world_own_turn_straight_steps"),
-            _rate(m, "world_quiet_false_detections", "world_quiet_straight_steps")),
+            _rate(m, "world_quiet_false_detections", "world_quiet_straight_steps"),
+        ),
     }
     bf = int(np.argmax(m["rel_false_detections"] - m["world_false_detections"]))
     false_detection_figure(wm, bf, rates, paths[5], n_false_runs)

@@ -117,7 +117,9 @@ class EncounterConfig:
                 f"encounter config: start_radius ({self.start_radius} m) must exceed r_safe ({self.r_safe} m)"
             )
         if self.own_motion not in ("straight", "markov"):
-            raise UserError(f"encounter config: own_motion must be 'straight' or 'markov', got {self.own_motion!r}")
+            raise UserError(
+                f"encounter config: own_motion must be 'straight' or 'markov', got {self.own_motion!r}"
+            )
         if int(self.horizon) < 1:
             raise UserError(f"encounter config: horizon must be >= 1 step, got {self.horizon!r}")
 
@@ -133,7 +135,9 @@ class EncounterConfig:
 
     def sigma(self) -> float:
         p = self.model()
-        return p.measurement_sigma if self.measurement_sigma is None else float(self.measurement_sigma)
+        return (
+            p.measurement_sigma if self.measurement_sigma is None else float(self.measurement_sigma)
+        )
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -157,7 +161,20 @@ def draw_encounters(seed: int, indices, cfg: EncounterConfig) -> dict:
     p = cfg.model()
     T = cfg.n_steps()
     L = noise_factor(np.asarray(p.process_noise))
-    out = {k: [] for k in ("start_angle", "speed", "aim", "own_heading", "mode_u", "own_mode_u", "w", "v", "e0")}
+    out = {
+        k: []
+        for k in (
+            "start_angle",
+            "speed",
+            "aim",
+            "own_heading",
+            "mode_u",
+            "own_mode_u",
+            "w",
+            "v",
+            "e0",
+        )
+    }
     for i in indices:
         rng = encounter_rng(seed, i)
         out["start_angle"].append(rng.uniform(-np.pi, np.pi))
@@ -236,7 +253,9 @@ def make_resolver(name: str, cfg: EncounterConfig, dt: float):
         params.update(dt=dt, horizon=int(cfg.horizon))
     elif name.startswith("bands"):
         params.update(lookahead_s=cfg.lookahead_s)
-    params.update(cfg.resolver_params.get(name, {}) if isinstance(cfg.resolver_params.get(name), dict) else {})
+    params.update(
+        cfg.resolver_params.get(name, {}) if isinstance(cfg.resolver_params.get(name), dict) else {}
+    )
     try:
         return factory(**params)
     except TypeError:
@@ -398,11 +417,15 @@ def _oracle_choice(min_sep: np.ndarray, cost: np.ndarray, r_safe: float, steps: 
         "n_manoeuvres": steps[pick, cols].astype(np.int64),
         "heading_change_rad": cost[pick, cols],
         "steps": np.zeros(ms.shape, dtype=np.int64),
-        "position_rmse_m": nan, "measurement_rmse_m": nan.copy(), "mode_accuracy": nan.copy(),
+        "position_rmse_m": nan,
+        "measurement_rmse_m": nan.copy(),
+        "mode_accuracy": nan.copy(),
     }
 
 
-def oracle_relative(seed: int, indices, cfg: EncounterConfig | None = None, n_angles: int = 72) -> dict:
+def oracle_relative(
+    seed: int, indices, cfg: EncounterConfig | None = None, n_angles: int = 72
+) -> dict:
     """Could any rotation within the paper's limit have avoided LoS? (B,) metrics.
 
     Perfect knowledge of the intruder's future (its modes and noise): candidates rotate the
@@ -420,7 +443,9 @@ def oracle_relative(seed: int, indices, cfg: EncounterConfig | None = None, n_an
     rates = np.asarray(preset.turn_rates, dtype=float)
     F = models.transition(rates, dt)
     cdf = mode_cdf(preset)
-    phis = np.concatenate([[0.0], np.linspace(-np.pi, np.pi, n_angles, endpoint=False) + np.pi / n_angles])
+    phis = np.concatenate(
+        [[0.0], np.linspace(-np.pi, np.pi, n_angles, endpoint=False) + np.pi / n_angles]
+    )
     C = phis.size
     p0, u = initial_geometry(draws, cfg)
     x = np.zeros((C, B, 5))
@@ -546,7 +571,9 @@ def run_relative(
         kwargs = {}
         if probabilistic:
             kwargs["mode_predictions"] = mode_predictions(imm, cfg, dt)
-        out = res.resolve(-est_vel, est_pos[:, None, :], est_vel[:, None, :], zeros_valid, max_turn, **kwargs)
+        out = res.resolve(
+            -est_vel, est_pos[:, None, :], est_vel[:, None, :], zeros_valid, max_turn, **kwargs
+        )
         theta = np.where(active, np.asarray(out.heading_change, dtype=float), 0.0)
         conflict = np.asarray(out.conflict, dtype=bool) & active
         turned = theta != 0.0
@@ -556,7 +583,10 @@ def run_relative(
         # the paper's frame rotation: the intruder's true relative velocity turns by θ
         x[:, VEL] = rotate(x[:, VEL], theta)
         if record:
-            cj = est_pos[:, None, :] + np.arange(1, H + 1)[None, :, None] * (est_vel * dt)[:, None, :]
+            cj = (
+                est_pos[:, None, :]
+                + np.arange(1, H + 1)[None, :, None] * (est_vel * dt)[:, None, :]
+            )
             tr["truth"][k], tr["z"][k], tr["estimate"][k], tr["mu"][k] = x, z, est, imm.mu
             tr["mode"][k], tr["conflict"][k], tr["theta"][k] = q, conflict, theta
             tr["predicted"][k] = cj

@@ -56,7 +56,9 @@ from airspace_sim.encounters.relative import (
 from airspace_sim.errors import UserError
 
 
-def intruder_initial_velocity(own_velocity: np.ndarray, aim_dir: np.ndarray, speed: np.ndarray) -> np.ndarray:
+def intruder_initial_velocity(
+    own_velocity: np.ndarray, aim_dir: np.ndarray, speed: np.ndarray
+) -> np.ndarray:
     """World velocity (B, 2) of speed ``speed`` whose velocity relative to ``own_velocity``
     points along the unit vectors ``aim_dir``."""
     a = np.einsum("bi,bi->b", own_velocity, aim_dir)
@@ -207,11 +209,16 @@ def run_world(
         kwargs = {}
         if probabilistic:
             kwargs["mode_predictions"] = (
-                mode_predictions(imm_d, cfg, dt) if is_rel
+                mode_predictions(imm_d, cfg, dt)
+                if is_rel
                 else mode_predictions(imm_d, cfg, dt, own[:, POS], own[:, VEL])
             )
-        out = res.resolve(own[:, VEL], rel_pos[:, None, :], rel_vel[:, None, :], valid, target_limit, **kwargs)
-        cmd = np.where(active, np.clip(np.asarray(out.heading_change, dtype=float), -max_step, max_step), 0.0)
+        out = res.resolve(
+            own[:, VEL], rel_pos[:, None, :], rel_vel[:, None, :], valid, target_limit, **kwargs
+        )
+        cmd = np.where(
+            active, np.clip(np.asarray(out.heading_change, dtype=float), -max_step, max_step), 0.0
+        )
         conflict = np.asarray(out.conflict, dtype=bool) & active
         met.n_manoeuvres += cmd != 0.0
         met.heading_change += np.abs(cmd)
@@ -229,8 +236,14 @@ def run_world(
     metrics = met.result()
     tw, trr = trk_w.result(), trk_r.result()
     metrics.update(tw if driver == "world" else trr)
-    for key in ("position_rmse_m", "mode_accuracy", "false_detections", "own_turn_straight_steps",
-                "quiet_false_detections", "quiet_straight_steps"):
+    for key in (
+        "position_rmse_m",
+        "mode_accuracy",
+        "false_detections",
+        "own_turn_straight_steps",
+        "quiet_false_detections",
+        "quiet_straight_steps",
+    ):
         metrics[f"world_{key}"] = tw[key]
         metrics[f"rel_{key}"] = trr[key]
     return EncounterBatch(indices, metrics, tr if record else None, dt, cfg)
@@ -254,8 +267,13 @@ def own_paths(own0: np.ndarray, rate: float, duration: float, times: np.ndarray)
     return np.stack([x, y], axis=-1)
 
 
-def oracle_world(seed: int, indices, cfg: EncounterConfig | None = None, n_durations: int = 41,
-                 fractions=(1.0, 0.5)) -> dict:
+def oracle_world(
+    seed: int,
+    indices,
+    cfg: EncounterConfig | None = None,
+    n_durations: int = 41,
+    fractions=(1.0, 0.5),
+) -> dict:
     """Could any ownship turn within the turn-rate limit have avoided LoS? (B,) metrics.
 
     Perfect knowledge of the intruder's (non-reacting) world trajectory. Candidates: turn

@@ -375,7 +375,9 @@ class AirspaceParallelEnv(ParallelEnv):
             return False
         i = self._index[a]
         p = np.asarray(self.world.positions, dtype=float)[i]
-        reach = max(self.capture_radius, float(np.asarray(self.world.speeds)[i]) * float(self.world.dt))
+        reach = max(
+            self.capture_radius, float(np.asarray(self.world.speeds)[i]) * float(self.world.dt)
+        )
         arrived = False
         while self._wp_index[a] < len(wps):
             k = self._wp_index[a]

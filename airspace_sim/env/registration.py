@@ -47,7 +47,9 @@ def register_envs() -> list[str]:
     for name in available():
         eid = env_id(name)
         for kind in ("parallel", "aec"):
-            registry = pettingzoo.parallel_registry if kind == "parallel" else pettingzoo.aec_registry
+            registry = (
+                pettingzoo.parallel_registry if kind == "parallel" else pettingzoo.aec_registry
+            )
             if eid in registry:
                 continue
             with warnings.catch_warnings():

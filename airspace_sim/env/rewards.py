@@ -37,9 +37,7 @@ def merge_weights(weights: dict | None) -> dict[str, float]:
     out = dict(DEFAULT_WEIGHTS)
     for name, w in (weights or {}).items():
         if name not in DEFAULT_WEIGHTS:
-            raise UserError(
-                f"reward: unknown term {name!r} (known: {', '.join(DEFAULT_WEIGHTS)})"
-            )
+            raise UserError(f"reward: unknown term {name!r} (known: {', '.join(DEFAULT_WEIGHTS)})")
         try:
             w = float(w)
         except (TypeError, ValueError):

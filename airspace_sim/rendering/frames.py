@@ -10,9 +10,7 @@ import numpy as np
 def _check_frame(frame, k: int) -> np.ndarray:
     a = np.asarray(frame)
     if a.ndim != 3 or a.shape[2] != 3 or a.dtype != np.uint8:
-        raise ValueError(
-            f"frame {k}: expected an (H, W, 3) uint8 array, got {a.shape} {a.dtype}"
-        )
+        raise ValueError(f"frame {k}: expected an (H, W, 3) uint8 array, got {a.shape} {a.dtype}")
     return a
 
 

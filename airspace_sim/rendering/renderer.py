@@ -144,9 +144,7 @@ class Renderer:
         if self.transform is None:
             pad = f.r_safe / 2 if f.r_safe else 0.0
             pos = f.positions[f.active] if f.active.any() else f.positions
-            self.transform = ViewTransform(
-                fit_view(pos, pad=pad), self.width, self.height
-            )
+            self.transform = ViewTransform(fit_view(pos, pad=pad), self.width, self.height)
         self._update_trails(f)
         s = self._surface
         s.fill(COLORS["background"])
@@ -303,7 +301,9 @@ class Renderer:
 
     def _mode_bars(self, s, x: int, y_base: int, mu: np.ndarray, height: int = 16) -> None:
         cols = (COLORS["mode_straight"], COLORS["mode_left"], COLORS["mode_right"])
-        pygame.draw.rect(s, (*COLORS["panel"], 170), (x - 1, y_base - height - 1, 4 * len(mu) + 1, height + 2))
+        pygame.draw.rect(
+            s, (*COLORS["panel"], 170), (x - 1, y_base - height - 1, 4 * len(mu) + 1, height + 2)
+        )
         for m, p in enumerate(mu):
             h = int(round(float(np.clip(p, 0, 1)) * height))
             col = cols[m % len(cols)]
@@ -434,7 +434,9 @@ class Renderer:
         if self._window is None:
             if not has_display():
                 if not self._warned_no_display:
-                    warnings.warn("render_mode='human': no display found, frames are not shown", stacklevel=2)
+                    warnings.warn(
+                        "render_mode='human': no display found, frames are not shown", stacklevel=2
+                    )
                     self._warned_no_display = True
                 return
             pygame.display.init()

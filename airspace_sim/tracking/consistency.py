@@ -61,7 +61,9 @@ def chi2_band(dof: int, n_runs: int = 1, prob: float = 0.95) -> tuple[float, flo
     E.g. ``chi2_band(2, 50, 0.95)`` = (1.59, 2.45), the textbook NIS example.
     """
     if dof < 1 or n_runs < 1 or not 0 < prob < 1:
-        raise ValueError(f"chi2_band: need dof >= 1, n_runs >= 1, 0 < prob < 1; got {dof}, {n_runs}, {prob}")
+        raise ValueError(
+            f"chi2_band: need dof >= 1, n_runs >= 1, 0 < prob < 1; got {dof}, {n_runs}, {prob}"
+        )
     k = dof * n_runs
     lo, hi = stats.chi2.ppf([(1 - prob) / 2, (1 + prob) / 2], k)
     return float(lo / n_runs), float(hi / n_runs)
@@ -219,7 +221,9 @@ def monte_carlo(
     F4 = models.constant_velocity(p.dt)[:4, :4]
     grid = {}
     for s in cv_sigmas:
-        kf = KalmanFilter(F4, models.white_noise_acceleration(s, p.dt)[:4, :4], H4, R, x0[:, :4], P0[:, :4, :4])
+        kf = KalmanFilter(
+            F4, models.white_noise_acceleration(s, p.dt)[:4, :4], H4, R, x0[:, :4], P0[:, :4, :4]
+        )
         ecv = np.empty((steps.size, n_runs, 4))
         for i, k in enumerate(steps):
             kf.step(Z[k])

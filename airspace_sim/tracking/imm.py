@@ -263,9 +263,7 @@ class IMM:
         self.gate_threshold = gate_d2
         self.M, self.n, self.m = M, n, m
         if kernel not in ("auto", "generated", "loops"):
-            raise UserError(
-                f"IMM kernel: expected 'auto', 'generated' or 'loops', got {kernel!r}"
-            )
+            raise UserError(f"IMM kernel: expected 'auto', 'generated' or 'loops', got {kernel!r}")
         self._choose_kernel(kernel)
 
         x0, P0, mu0 = self._initial(x0, P0, mu0, "")

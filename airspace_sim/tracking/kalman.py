@@ -49,7 +49,9 @@ class KalmanFilter:
         (B, 1, n, n)), so the filter can stand in where an IMM is expected.
     """
 
-    def __init__(self, transition, process_noise, measurement_matrix, measurement_noise, x0, P0, offset=None):
+    def __init__(
+        self, transition, process_noise, measurement_matrix, measurement_noise, x0, P0, offset=None
+    ):
         F = np.asarray(transition, dtype=float)
         n = F.shape[-1]
         if F.shape != (n, n):
@@ -87,7 +89,9 @@ class KalmanFilter:
         try:
             P0 = np.broadcast_to(P0, (x0.shape[0], self.n, self.n))
         except ValueError:
-            raise UserError(f"KalmanFilter: P0 must be ({self.n}, {self.n}) or (B, {self.n}, {self.n}), got {P0.shape}") from None
+            raise UserError(
+                f"KalmanFilter: P0 must be ({self.n}, {self.n}) or (B, {self.n}, {self.n}), got {P0.shape}"
+            ) from None
         if not (np.all(np.isfinite(x0)) and np.all(np.isfinite(P0))):
             raise UserError("KalmanFilter: x0 and P0 must be finite")
         start = self.B

@@ -33,11 +33,21 @@ from airspace_sim.scenarios.schema import (
 )
 
 
-def ring_scenario(n: int, r_safe: float = 3000.0, radius: float | None = None,
-                  speed: float = 230.0, dt: float = 1.0, tracker: str = "imm",
-                  resolver: str = "bands", lookahead: float = 120.0, margin: float = 0.1,
-                  sigma: float = 50.0, sensor_range: float = 40000.0,
-                  duration: float | None = None, seed: int = 0) -> Scenario:
+def ring_scenario(
+    n: int,
+    r_safe: float = 3000.0,
+    radius: float | None = None,
+    speed: float = 230.0,
+    dt: float = 1.0,
+    tracker: str = "imm",
+    resolver: str = "bands",
+    lookahead: float = 120.0,
+    margin: float = 0.1,
+    sigma: float = 50.0,
+    sensor_range: float = 40000.0,
+    duration: float | None = None,
+    seed: int = 0,
+) -> Scenario:
     """``n`` aircraft evenly on a circle, all heading for the diametrically opposite point.
 
     ``radius`` defaults to the smallest ring on which neighbours start 10% more than
@@ -50,21 +60,35 @@ def ring_scenario(n: int, r_safe: float = 3000.0, radius: float | None = None,
     for i in range(n):
         a = 2.0 * math.pi * i / n
         p = (radius * math.cos(a), radius * math.sin(a))
-        aircraft.append(AircraftSpec(
-            id=f"R{i:03d}", position=p, heading_deg=math.degrees(a + math.pi) % 360.0,
-            speed=speed, autopilot="route", waypoints=[(-p[0], -p[1])]))
+        aircraft.append(
+            AircraftSpec(
+                id=f"R{i:03d}",
+                position=p,
+                heading_deg=math.degrees(a + math.pi) % 360.0,
+                speed=speed,
+                autopilot="route",
+                waypoints=[(-p[0], -p[1])],
+            )
+        )
     if duration is None:
         duration = math.ceil(2.0 * radius / speed + 300.0)
     return Scenario(
-        name=f"ring{n}", description=f"{n} aircraft on a {radius / 1000:.1f} km ring",
-        seed=seed, dt=dt, duration=duration, separation=Separation(r_safe=r_safe),
-        sensor=SensorSpec(range=sensor_range, sigma=sigma), tracker=TrackerSpec(kind=tracker),
+        name=f"ring{n}",
+        description=f"{n} aircraft on a {radius / 1000:.1f} km ring",
+        seed=seed,
+        dt=dt,
+        duration=duration,
+        separation=Separation(r_safe=r_safe),
+        sensor=SensorSpec(range=sensor_range, sigma=sigma),
+        tracker=TrackerSpec(kind=tracker),
         resolver=ResolverSpec(kind=resolver, lookahead=lookahead, margin=margin),
-        aircraft=aircraft)
+        aircraft=aircraft,
+    )
 
 
-def random_scenario(n: int, trackers: bool = True, seed: int = 0, resolver: str = "bands",
-                    duration: float = 600.0) -> Scenario:
+def random_scenario(
+    n: int, trackers: bool = True, seed: int = 0, resolver: str = "bands", duration: float = 600.0
+) -> Scenario:
     """The benchmark traffic (module docstring): ``n`` aircraft at constant density."""
     rng = np.random.default_rng(seed)
     side = 10000.0 * math.sqrt(n)
@@ -81,18 +105,32 @@ def random_scenario(n: int, trackers: bool = True, seed: int = 0, resolver: str 
         if np.hypot(*(target - p)) < half:
             target = -np.sign(p) * half
         heading = math.degrees(math.atan2(target[1] - p[1], target[0] - p[0]))
-        aircraft.append(AircraftSpec(
-            id=f"A{i:04d}", position=(float(p[0]), float(p[1])), heading_deg=heading % 360.0,
-            speed=230.0, autopilot="route", waypoints=[(float(target[0]), float(target[1]))]))
+        aircraft.append(
+            AircraftSpec(
+                id=f"A{i:04d}",
+                position=(float(p[0]), float(p[1])),
+                heading_deg=heading % 360.0,
+                speed=230.0,
+                autopilot="route",
+                waypoints=[(float(target[0]), float(target[1]))],
+            )
+        )
     return Scenario(
-        name=f"random{n}", seed=seed, dt=1.0, duration=duration,
-        separation=Separation(r_safe=3000.0), sensor=SensorSpec(range=40000.0, sigma=50.0),
+        name=f"random{n}",
+        seed=seed,
+        dt=1.0,
+        duration=duration,
+        separation=Separation(r_safe=3000.0),
+        sensor=SensorSpec(range=40000.0, sigma=50.0),
         tracker=TrackerSpec(kind="imm" if trackers else "truth"),
-        resolver=ResolverSpec(kind=resolver, lookahead=120.0), aircraft=aircraft)
+        resolver=ResolverSpec(kind=resolver, lookahead=120.0),
+        aircraft=aircraft,
+    )
 
 
-def bench_world(n_aircraft: int, steps: int = 50, trackers: bool = True, warmup: int = 5,
-                seed: int = 0) -> dict:
+def bench_world(
+    n_aircraft: int, steps: int = 50, trackers: bool = True, warmup: int = 5, seed: int = 0
+) -> dict:
     """Time ``steps`` world steps of :func:`random_scenario` with ``n_aircraft`` aircraft.
 
     Returns a dict: ``n_aircraft``, ``steps``, ``trackers``, ``steps_per_s`` (after

@@ -66,8 +66,14 @@ class Airspace:
     began : dict set → (E, 2) int64 pairs (i < j) that began overlapping in the last step.
     """
 
-    def __init__(self, positions, r_safe: float, nmac: float, sensor_range: float,
-                 spatial_hash: bool | None = None):
+    def __init__(
+        self,
+        positions,
+        r_safe: float,
+        nmac: float,
+        sensor_range: float,
+        spatial_hash: bool | None = None,
+    ):
         positions = np.asarray(positions, dtype=float).reshape(-1, 2)
         self.n = n = positions.shape[0]
         self.space = space = pymunk.Space()
@@ -153,7 +159,9 @@ class Airspace:
         if self._order.size:
             self.space.step(dt)
             self._buf_get.clear()
-            pymunk.batch.get_space_bodies(self.space, pymunk.batch.BodyFields.POSITION, self._buf_get)
+            pymunk.batch.get_space_bodies(
+                self.space, pymunk.batch.BodyFields.POSITION, self._buf_get
+            )
             out_positions[self._order] = np.frombuffer(self._buf_get.float_buf()).reshape(-1, 2)
         self._drain()
 

@@ -76,8 +76,12 @@ from airspace_sim.errors import UserError
 def build_resolver(scenario, dt: float):
     """The scenario's resolver object, with the keyword arguments it accepts."""
     factory = registry.get("resolver", scenario.resolver.kind)
-    offered = {"r_safe": scenario.separation.r_safe, "lookahead_s": scenario.resolver.lookahead,
-               "margin": scenario.resolver.margin, "dt": dt}
+    offered = {
+        "r_safe": scenario.separation.r_safe,
+        "lookahead_s": scenario.resolver.lookahead,
+        "margin": scenario.resolver.margin,
+        "dt": dt,
+    }
     try:
         params = inspect.signature(factory).parameters
         takes_any = any(p.kind is p.VAR_KEYWORD for p in params.values())
@@ -86,8 +90,13 @@ def build_resolver(scenario, dt: float):
     extra = dict(scenario.resolver.params)
     # Most specific first; a factory taking **params may forward to a constructor that
     # rejects some of them, so retry with fewer.
-    tries = (("r_safe", "lookahead_s", "margin", "dt"), ("r_safe", "lookahead_s", "margin"),
-             ("r_safe", "lookahead_s"), ("r_safe",), ())
+    tries = (
+        ("r_safe", "lookahead_s", "margin", "dt"),
+        ("r_safe", "lookahead_s", "margin"),
+        ("r_safe", "lookahead_s"),
+        ("r_safe",),
+        (),
+    )
     last = None
     for names in tries:
         kwargs = {k: offered[k] for k in names if takes_any or k in params}
@@ -122,8 +131,13 @@ class Encounters:
     valid: np.ndarray
 
     def subset(self, mask: np.ndarray) -> Encounters:
-        return Encounters(self.owners[mask], self.rows[mask], self.rel_position[mask],
-                          self.rel_velocity[mask], self.valid[mask])
+        return Encounters(
+            self.owners[mask],
+            self.rows[mask],
+            self.rel_position[mask],
+            self.rel_velocity[mask],
+            self.valid[mask],
+        )
 
     def compact(self, keep: np.ndarray) -> Encounters:
         """Only the slots with ``keep`` (n_own, K) True, packed to the left, K shrunk."""
@@ -133,13 +147,18 @@ class Encounters:
         order = np.argsort(~keep, axis=1, kind="stable")[:, :K]  # kept slots first
         take = lambda a: np.take_along_axis(a, order.reshape(n, K, *([1] * (a.ndim - 2))), axis=1)
         valid = take(keep)
-        return Encounters(self.owners, np.where(valid, take(self.rows), -1),
-                          np.where(valid[..., None], take(self.rel_position), 0.0),
-                          np.where(valid[..., None], take(self.rel_velocity), 0.0), valid)
+        return Encounters(
+            self.owners,
+            np.where(valid, take(self.rows), -1),
+            np.where(valid[..., None], take(self.rel_position), 0.0),
+            np.where(valid[..., None], take(self.rel_velocity), 0.0),
+            valid,
+        )
 
 
-def reachable(enc: Encounters, own_velocity, radius: float, lookahead: float,
-              step: float = 10.0) -> np.ndarray:
+def reachable(
+    enc: Encounters, own_velocity, radius: float, lookahead: float, step: float = 10.0
+) -> np.ndarray:
     """(n_own, K) bool: could the intruder come within ``radius`` during the look-ahead for
     SOME heading of the ownship (own speed kept, intruder straight)?
 
@@ -165,8 +184,9 @@ def gather(track_owner, track_x, positions, velocities, runs) -> Encounters:
     sel = np.flatnonzero(runs[track_owner]) if track_owner.size else np.zeros(0, np.int64)
     if sel.size == 0:
         z = np.zeros((0, 0, 2))
-        return Encounters(np.zeros(0, np.int64), np.zeros((0, 0), np.int64), z, z.copy(),
-                          np.zeros((0, 0), bool))
+        return Encounters(
+            np.zeros(0, np.int64), np.zeros((0, 0), np.int64), z, z.copy(), np.zeros((0, 0), bool)
+        )
     own = track_owner[sel]
     order = np.argsort(own, kind="stable")
     sel, own = sel[order], own[order]
@@ -223,11 +243,15 @@ class Avoidance:
         self.resume_decay_s = None if spec.resume_decay_s is None else float(spec.resume_decay_s)
         self.confirm_steps = math.ceil(float(spec.confirm_s) / dt - 1e-9)
         if spec.turn_preference not in self.PREFERENCES:
-            raise UserError(f"{scenario.source}: resolver.turn_preference: expected one of "
-                            f"{', '.join(self.PREFERENCES)}, got {spec.turn_preference!r}")
+            raise UserError(
+                f"{scenario.source}: resolver.turn_preference: expected one of "
+                f"{', '.join(self.PREFERENCES)}, got {spec.turn_preference!r}"
+            )
         if not (0.0 <= spec.search_deg <= 180.0):
-            raise UserError(f"{scenario.source}: resolver.search_deg: expected 0..180 degrees, "
-                            f"got {spec.search_deg!r}")
+            raise UserError(
+                f"{scenario.source}: resolver.search_deg: expected 0..180 degrees, "
+                f"got {spec.search_deg!r}"
+            )
         self.preference = spec.turn_preference
         self.memory_steps = math.ceil(float(spec.side_memory_s) / dt - 1e-9)
         self._clear_for = None  # steps each aircraft has been clear of conflict
@@ -235,22 +259,34 @@ class Avoidance:
         try:  # resolvers that can judge a heading change as flown get the turn rate
             rp = inspect.signature(self.resolver.resolve).parameters
             self._takes_turn_rate = "turn_rate" in rp or any(
-                q.kind is q.VAR_KEYWORD for q in rp.values())
+                q.kind is q.VAR_KEYWORD for q in rp.values()
+            )
             # only resolvers that use them (``bands`` accepts and ignores them)
-            self._takes_modes = ("mode_predictions" in rp
-                                 and getattr(self.resolver, "uses_mode_predictions", False))
+            self._takes_modes = "mode_predictions" in rp and getattr(
+                self.resolver, "uses_mode_predictions", False
+            )
         except (TypeError, ValueError, AttributeError):
             self._takes_turn_rate = self._takes_modes = False
-        horizon = self.lookahead if spec.probability_horizon_s is None else float(
-            spec.probability_horizon_s)
+        horizon = (
+            self.lookahead
+            if spec.probability_horizon_s is None
+            else float(spec.probability_horizon_s)
+        )
         S = int(spec.probability_samples)
         #: seconds ahead at which mode predictions are sampled (mode-aware resolvers)
         self.prediction_times_s = horizon * np.arange(1, S + 1) / S
         #: whether advice overrides the autopilot ("none" only reports conflicts)
         self.overrides = self.kind != "none"
 
-    def advise(self, enc: Encounters, velocities, max_heading_change, n: int, side=None,
-               mode_predictions=None):
+    def advise(
+        self,
+        enc: Encounters,
+        velocities,
+        max_heading_change,
+        n: int,
+        side=None,
+        mode_predictions=None,
+    ):
         """(advice (n,) rad, conflict (n,) bool) for all aircraft (0 / False off ``enc``).
 
         ``side`` (n,) float, updated in place: the committed turn side of each aircraft
@@ -265,13 +301,22 @@ class Avoidance:
             # bands turn only ownships whose current heading is not clear: find those with
             # the resolver's own CPA test (C = 1) and run the band search on them alone
             vo = velocities[enc.owners]
-            ratio0 = cpa_min_ratio(vo, enc.rel_position, enc.rel_velocity, enc.valid,
-                                   np.zeros((enc.owners.size, 1)),
-                                   self.r_safe * (1.0 + self.margin), self.lookahead)[:, 0]
+            ratio0 = cpa_min_ratio(
+                vo,
+                enc.rel_position,
+                enc.rel_velocity,
+                enc.valid,
+                np.zeros((enc.owners.size, 1)),
+                self.r_safe * (1.0 + self.margin),
+                self.lookahead,
+            )[:, 0]
             enc = enc.subset(~(ratio0 >= 1.0 - CLEAR_TOLERANCE))
             # and only on the intruders some heading could bring within the clear radius
-            enc = enc.compact(reachable(enc, velocities[enc.owners],
-                                        self.r_safe * (1.0 + self.margin), self.lookahead))
+            enc = enc.compact(
+                reachable(
+                    enc, velocities[enc.owners], self.r_safe * (1.0 + self.margin), self.lookahead
+                )
+            )
         if enc.owners.size:
             mx = max_heading_change[enc.owners]
             kw = {"turn_rate": mx / self.dt} if self._takes_turn_rate else {}
@@ -279,17 +324,30 @@ class Avoidance:
                 pred = mode_predictions(enc, self.prediction_times_s)
                 if pred is not None:
                     kw["mode_predictions"] = pred
-            out = self.resolver.resolve(velocities[enc.owners], enc.rel_position,
-                                        enc.rel_velocity, enc.valid,
-                                        np.maximum(mx, self.search_range), **kw)
+            out = self.resolver.resolve(
+                velocities[enc.owners],
+                enc.rel_position,
+                enc.rel_velocity,
+                enc.valid,
+                np.maximum(mx, self.search_range),
+                **kw,
+            )
             psi = np.asarray(out.heading_change, dtype=float)
             c = np.asarray(out.conflict, dtype=bool)
-            if (side is not None and self.preference != "none"
-                    and getattr(out, "band", None) is not None):
+            if (
+                side is not None
+                and self.preference != "none"
+                and getattr(out, "band", None) is not None
+            ):
                 mr = getattr(out, "min_ratio", None)
-                psi, new_side = self._commit(psi, c, side[enc.owners],
-                                             np.asarray(out.candidates), np.asarray(out.band),
-                                             None if mr is None else np.asarray(mr))
+                psi, new_side = self._commit(
+                    psi,
+                    c,
+                    side[enc.owners],
+                    np.asarray(out.candidates),
+                    np.asarray(out.band),
+                    None if mr is None else np.asarray(mr),
+                )
                 side[enc.owners] = new_side
             advice[enc.owners] = np.clip(psi, -mx, mx)
             conflict[enc.owners] = c
@@ -318,8 +376,9 @@ class Avoidance:
             has_r, pick_r = first_clear(cand <= 0)
             has_l, pick_l = first_clear(cand >= 0)
             psi = np.where(fresh & has_r, pick_r, np.where(fresh & ~has_r & has_l, pick_l, psi))
-            new_side = np.where(fresh, np.where(has_r, -1.0, np.where(has_l, 1.0, np.sign(psi))),
-                                new_side)
+            new_side = np.where(
+                fresh, np.where(has_r, -1.0, np.where(has_l, 1.0, np.sign(psi))), new_side
+            )
             # left is only the fallback: back to the convention's side as soon as a strictly
             # right heading is clear (one ownship left and one right can turn into each other)
             back = conflict & (side > 0) & first_clear(cand < 0)[0]
@@ -341,8 +400,9 @@ class Avoidance:
             new_side = np.where(kept & ~has_s, np.sign(psi), new_side)
         return psi, np.where(conflict, new_side, side)
 
-    def resume_clear(self, enc: Encounters, velocities, turn, max_heading_change,
-                     off_route_s=None) -> np.ndarray:
+    def resume_clear(
+        self, enc: Encounters, velocities, turn, max_heading_change, off_route_s=None
+    ) -> np.ndarray:
         """For the ownships of ``enc``: is the heading change ``turn`` (n_own,) clear?
 
         ``off_route_s`` (N,) seconds each aircraft has been off its autopilot; the extra
@@ -358,8 +418,15 @@ class Avoidance:
         if off_route_s is not None and self.resume_decay_s is not None:
             left = 1.0 - np.asarray(off_route_s)[enc.owners] / max(self.resume_decay_s, 1e-9)
             extra *= np.clip(left, 0.0, 1.0)
-        _, clear = resume_heading_change(vo, desired, enc.rel_position, enc.rel_velocity,
-                                         enc.valid, max_heading_change[enc.owners],
-                                         r_safe=self.r_safe, lookahead_s=self.lookahead,
-                                         margin=self.margin + extra)
+        _, clear = resume_heading_change(
+            vo,
+            desired,
+            enc.rel_position,
+            enc.rel_velocity,
+            enc.valid,
+            max_heading_change[enc.owners],
+            r_safe=self.r_safe,
+            lookahead_s=self.lookahead,
+            margin=self.margin + extra,
+        )
         return np.asarray(clear, dtype=bool)

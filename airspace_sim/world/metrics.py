@@ -53,8 +53,18 @@ class Metrics:
         self.mode_samples = 0
         self._prev_conflict = np.zeros(n, dtype=bool)
 
-    def contacts(self, positions, los_keys, los_began, nmac_keys, nmac_began, range_keys,
-                 prev_positions=None, prev_los_keys=None, prev_nmac_keys=None):
+    def contacts(
+        self,
+        positions,
+        los_keys,
+        los_began,
+        nmac_keys,
+        nmac_began,
+        range_keys,
+        prev_positions=None,
+        prev_los_keys=None,
+        prev_nmac_keys=None,
+    ):
         """Record this step's pair sets (sorted keys ``i·N + j``) and new episodes.
 
         Pymunk's sets are sampled at step instants; two aircraft closing at 460 m/s can jump
@@ -133,7 +143,9 @@ class Metrics:
             "extra_path_m": float(extra.sum()),
             "extra_path_pct": 100.0 * float(extra.sum()) / planned if planned > 0 else math.nan,
             "avoidance_turn_deg": float(np.degrees(self.avoid_turn).mean()) if self.n else 0.0,
-            "track_rmse_m": math.sqrt(self.sq_err / self.track_samples) if self.track_samples else math.nan,
+            "track_rmse_m": math.sqrt(self.sq_err / self.track_samples)
+            if self.track_samples
+            else math.nan,
             "mode_accuracy": self.mode_hits / self.mode_samples if self.mode_samples else math.nan,
             "track_steps": self.track_samples,
         }

@@ -36,10 +36,13 @@ class Radar:
 
     def __init__(self, spec: SensorSpec, dt: float):
         if not (spec.sigma >= 0 and np.isfinite(spec.sigma)):
-            raise UserError(f"sensor.sigma: must be a non-negative number of metres, got {spec.sigma!r}")
+            raise UserError(
+                f"sensor.sigma: must be a non-negative number of metres, got {spec.sigma!r}"
+            )
         if not (0.0 <= spec.detection_probability <= 1.0):
             raise UserError(
-                f"sensor.detection_probability: must be in [0, 1], got {spec.detection_probability!r}")
+                f"sensor.detection_probability: must be in [0, 1], got {spec.detection_probability!r}"
+            )
         if not (spec.period > 0):
             raise UserError(f"sensor.period: must be positive seconds, got {spec.period!r}")
         self.sigma = float(spec.sigma)

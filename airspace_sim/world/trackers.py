@@ -66,8 +66,15 @@ class TrackTable:
     ``mode_names`` (M,) str.
     """
 
-    def __init__(self, n_aircraft: int, kind: str, preset: Preset, sigma: float,
-                 drop_after_misses: int, scan_period_s: float):
+    def __init__(
+        self,
+        n_aircraft: int,
+        kind: str,
+        preset: Preset,
+        sigma: float,
+        drop_after_misses: int,
+        scan_period_s: float,
+    ):
         from airspace_sim import registry
 
         self.n = int(n_aircraft)
@@ -88,8 +95,11 @@ class TrackTable:
         self._pend_t = np.zeros(0)
         rates = np.abs(np.asarray(preset.turn_rates, dtype=float))
         self._omega_var = float(max(rates.max(initial=0.0), np.radians(3.0))) ** 2
-        self.mode_names = (["straight", "left", "right"] if preset.n_modes == 3
-                           else [f"mode{j}" for j in range(preset.n_modes)])
+        self.mode_names = (
+            ["straight", "left", "right"]
+            if preset.n_modes == 3
+            else [f"mode{j}" for j in range(preset.n_modes)]
+        )
 
     # ------------------------------------------------------------------ views
     def __len__(self) -> int:
@@ -118,8 +128,9 @@ class TrackTable:
         return np.ones((len(self), 1))
 
     # ----------------------------------------------------------------- update
-    def update(self, time: float, scanned: bool, det_owner, det_intruder, z, alive,
-               truth_states=None) -> None:
+    def update(
+        self, time: float, scanned: bool, det_owner, det_intruder, z, alive, truth_states=None
+    ) -> None:
         """One world step of the table.
 
         time : s, now. scanned : a scan happened now. det_owner, det_intruder (D,) int and
@@ -183,7 +194,10 @@ class TrackTable:
         max_age = self.drop_after * self.scan_period_s + 1e-9
         fresh = (time - self._pend_t) <= max_age
         self._pend_key, self._pend_z, self._pend_t = (
-            self._pend_key[fresh], self._pend_z[fresh], self._pend_t[fresh])
+            self._pend_key[fresh],
+            self._pend_z[fresh],
+            self._pend_t[fresh],
+        )
         prev = _sort_lookup(self._pend_key, keys)
         two = prev >= 0
         if two.any():
@@ -208,7 +222,10 @@ class TrackTable:
             gone = np.zeros(self._pend_key.size, dtype=bool)
             gone[p] = True
             self._pend_key, self._pend_z, self._pend_t = (
-                self._pend_key[~gone], self._pend_z[~gone], self._pend_t[~gone])
+                self._pend_key[~gone],
+                self._pend_z[~gone],
+                self._pend_t[~gone],
+            )
         # the others become (or refresh) pending detections
         rest = ~two
         if rest.any():
@@ -224,4 +241,7 @@ class TrackTable:
                 self._pend_t = np.concatenate([self._pend_t, np.full(nk.size, time)])
                 o = np.argsort(self._pend_key, kind="stable")
                 self._pend_key, self._pend_z, self._pend_t = (
-                    self._pend_key[o], self._pend_z[o], self._pend_t[o])
+                    self._pend_key[o],
+                    self._pend_z[o],
+                    self._pend_t[o],
+                )

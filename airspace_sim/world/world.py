@@ -118,14 +118,19 @@ class World:
         self.active = np.ones(n, dtype=bool)
         self.turn_rates = np.zeros(n)
         self.flown = np.zeros(n)
-        bad = ~np.isfinite(self.positions).all(axis=1) | ~np.isfinite(self.speeds) | (self.speeds < 0)
+        bad = (
+            ~np.isfinite(self.positions).all(axis=1) | ~np.isfinite(self.speeds) | (self.speeds < 0)
+        )
         bad |= ~np.isfinite(self.max_turn_rate) | (self.max_turn_rate < 0)
         if bad.any():
             a = self.specs[int(np.flatnonzero(bad)[0])]
-            raise UserError(f"{sc.source}: aircraft {a.id!r}: position, speed and "
-                            f"max_turn_rate_deg must be finite and non-negative")
-        self.velocities = self.speeds[:, None] * np.stack([np.cos(self.headings),
-                                                           np.sin(self.headings)], axis=1)
+            raise UserError(
+                f"{sc.source}: aircraft {a.id!r}: position, speed and "
+                f"max_turn_rate_deg must be finite and non-negative"
+            )
+        self.velocities = self.speeds[:, None] * np.stack(
+            [np.cos(self.headings), np.sin(self.headings)], axis=1
+        )
         self.r_safe = float(sc.separation.r_safe)
         self.nmac_distance = float(sc.separation.nmac)
         self.sensor_range = float(sc.sensor.range)
@@ -133,15 +138,22 @@ class World:
         # --- parts
         self.keys = streams.aircraft_keys(self.seed, n)
         self.pilot_preset = presets.get(sc.model, dt=self.dt)
-        ctx = AutopilotContext(dt=self.dt, preset=self.pilot_preset, keys=self.keys,
-                               start_positions=self.positions.copy())
+        ctx = AutopilotContext(
+            dt=self.dt,
+            preset=self.pilot_preset,
+            keys=self.keys,
+            start_positions=self.positions.copy(),
+        )
         self.autopilots = []  # (name, members, object)
         names = sorted({a.autopilot for a in self.specs})
         for name in names:
             factory = registry.get("autopilot", name)
-            members = np.array([i for i, a in enumerate(self.specs) if a.autopilot == name],
-                               dtype=np.int64)
-            self.autopilots.append((name, members, factory(members, [self.specs[i] for i in members], ctx)))
+            members = np.array(
+                [i for i, a in enumerate(self.specs) if a.autopilot == name], dtype=np.int64
+            )
+            self.autopilots.append(
+                (name, members, factory(members, [self.specs[i] for i in members], ctx))
+            )
         self.modes = np.full(n, -1, dtype=np.int64)
         self._is_markov = np.zeros(n, dtype=bool)
         self._has_plan = np.zeros(n, dtype=bool)
@@ -153,15 +165,19 @@ class World:
 
         self.sensor = registry.get("sensor", sc.sensor.kind)(sc.sensor, self.dt)
         self.tracker_preset = presets.get(sc.tracker.model, dt=self.dt)
-        self.tracks = TrackTable(n, sc.tracker.kind, self.tracker_preset, sc.sensor.sigma,
-                                 sc.sensor.drop_after_misses,
-                                 self.sensor.period_steps * self.dt)
+        self.tracks = TrackTable(
+            n,
+            sc.tracker.kind,
+            self.tracker_preset,
+            sc.sensor.sigma,
+            sc.sensor.drop_after_misses,
+            self.sensor.period_steps * self.dt,
+        )
         self.avoidance = Avoidance(sc, self.dt)
         self.trackers_on = self.controlled | self.avoid  # ownships that track intruders
         self.metrics_acc = Metrics(n, self.r_safe, self.nmac_distance, self.dt)
 
-        self.airspace = Airspace(self.positions, self.r_safe, self.nmac_distance,
-                                 self.sensor_range)
+        self.airspace = Airspace(self.positions, self.r_safe, self.nmac_distance, self.sensor_range)
         self.in_los = np.zeros(n, dtype=bool)
         self.nmac = np.zeros(n, dtype=bool)
         self.advice = np.zeros(n)
@@ -170,8 +186,13 @@ class World:
         self.off_route_s = np.zeros(n)  # seconds since the autopilot last flew it (CDA)
         self._prev_contacts = ()  # positions, LoS and NMAC keys at the previous step
         self._side = np.zeros(n)  # committed avoidance side per aircraft: −1 right, +1 left
-        self._enc = Encounters(np.zeros(0, np.int64), np.zeros((0, 0), np.int64),
-                               np.zeros((0, 0, 2)), np.zeros((0, 0, 2)), np.zeros((0, 0), bool))
+        self._enc = Encounters(
+            np.zeros(0, np.int64),
+            np.zeros((0, 0), np.int64),
+            np.zeros((0, 0, 2)),
+            np.zeros((0, 0, 2)),
+            np.zeros((0, 0), bool),
+        )
         self._after_motion(initial=True)
 
     # ------------------------------------------------------------------ step
@@ -183,8 +204,9 @@ class World:
             autopilot / resolver. Entries of other aircraft are ignored.
         """
         n, dt = self.n, self.dt
-        state = FlightState(self.positions, self.headings, self.speeds, self.max_turn_rate,
-                            dt, self.step_count)
+        state = FlightState(
+            self.positions, self.headings, self.speeds, self.max_turn_rate, dt, self.step_count
+        )
         ap_rate = np.zeros(n)
         desired = np.full(n, np.nan)
         for _, members, ap in self.autopilots:
@@ -202,15 +224,21 @@ class World:
             follow = self.avoid & self.active & self.conflict & ~self.controlled
             rate = np.where(follow, self.advice / dt, rate)
             # resume toward the autopilot's heading only if that turn is clear
-            resuming = (self.avoid & self.active & ~self.conflict & ~self.controlled
-                        & np.isfinite(desired) & (np.abs(ap_rate) * dt > TURN_TOLERANCE))
+            resuming = (
+                self.avoid
+                & self.active
+                & ~self.conflict
+                & ~self.controlled
+                & np.isfinite(desired)
+                & (np.abs(ap_rate) * dt > TURN_TOLERANCE)
+            )
             enc = self._enc
             if resuming.any() and enc.owners.size:
                 sub = enc.subset(resuming[enc.owners])
                 if sub.owners.size:
-                    clear = self.avoidance.resume_clear(sub, self.velocities,
-                                                        ap_rate[sub.owners] * dt, max_dh,
-                                                        self.off_route_s)
+                    clear = self.avoidance.resume_clear(
+                        sub, self.velocities, ap_rate[sub.owners] * dt, max_dh, self.off_route_s
+                    )
                     hold = sub.owners[~clear]
                     rate[hold] = 0.0
                     follow[hold] = True
@@ -244,14 +272,16 @@ class World:
         self.turn_rates = rate
         self.flown += np.where(self.active, self.speeds * dt, 0.0)
         self.metrics_acc.avoidance_turn(turn, follow)
-        self.velocities = self.speeds[:, None] * np.stack([np.cos(self.headings),
-                                                           np.sin(self.headings)], axis=1)
+        self.velocities = self.speeds[:, None] * np.stack(
+            [np.cos(self.headings), np.sin(self.headings)], axis=1
+        )
         self.time = (self.step_count + 1) * dt
         self.step_count += 1
 
         # route aircraft that finished leave the world
-        state = FlightState(self.positions, self.headings, self.speeds, self.max_turn_rate,
-                            dt, self.step_count)
+        state = FlightState(
+            self.positions, self.headings, self.speeds, self.max_turn_rate, dt, self.step_count
+        )
         finished = np.zeros(n, dtype=bool)
         for _, members, ap in self.autopilots:
             finished[members] = ap.after_step(state)
@@ -297,14 +327,26 @@ class World:
         ok = t.age >= self.avoidance.confirm_steps  # confirmed tracks only
         self._enc = gather(t.owner[ok], t.x[ok], self.positions, self.velocities, runs)
         self._enc_track_rows = np.flatnonzero(ok)  # enc.rows index these table rows
-        self.advice, self.conflict = self.avoidance.advise(self._enc, self.velocities,
-                                                           self.max_turn_rate * self.dt, n,
-                                                           self._side, self.mode_predictions)
+        self.advice, self.conflict = self.avoidance.advise(
+            self._enc,
+            self.velocities,
+            self.max_turn_rate * self.dt,
+            n,
+            self._side,
+            self.mode_predictions,
+        )
         self.conflict &= self.active
         # metrics
         m = self.metrics_acc
-        m.contacts(self.positions, sp.pairs[LOS], sp.began[LOS], sp.pairs[NMAC], sp.began[NMAC],
-                   sp.pairs[RANGE], *self._prev_contacts)
+        m.contacts(
+            self.positions,
+            sp.pairs[LOS],
+            sp.began[LOS],
+            sp.pairs[NMAC],
+            sp.began[NMAC],
+            sp.pairs[RANGE],
+            *self._prev_contacts,
+        )
         self._prev_contacts = (self.positions.copy(), sp.pairs[LOS].copy(), sp.pairs[NMAC].copy())
         m.conflicts(self.conflict)
         if not initial and len(t):
@@ -345,8 +387,10 @@ class World:
             sl = slice(a, a + chunk)
             x, P = f.predict_modes_at(steps, rows[sl])
             own = enc.owners[oi[sl]]
-            straight = (self.positions[own][:, None, :] + t[None, :, None]
-                        * self.velocities[own][:, None, :])  # (r, S, 2)
+            straight = (
+                self.positions[own][:, None, :]
+                + t[None, :, None] * self.velocities[own][:, None, :]
+            )  # (r, S, 2)
             xs[oi[sl], ki[sl]] = x[..., (0, 2)] - straight[:, None]
             Ps[oi[sl], ki[sl]] = P[..., (0, 2), :][..., (0, 2)]
             mu[oi[sl], ki[sl]] = mu_all[rows[sl]]
@@ -377,8 +421,9 @@ class World:
 
     def progress(self) -> np.ndarray:
         """(N,) planned distance covered so far per aircraft, m (NaN: no plan, e.g. Markov)."""
-        state = FlightState(self.positions, self.headings, self.speeds, self.max_turn_rate,
-                            self.dt, self.step_count)
+        state = FlightState(
+            self.positions, self.headings, self.speeds, self.max_turn_rate, self.dt, self.step_count
+        )
         out = np.full(self.n, np.nan)
         for _, members, ap in self.autopilots:
             out[members] = ap.progress(state)
@@ -391,8 +436,9 @@ class World:
         ``min_separation_m``, ``alerts``, ``conflict_s``, ``extra_path_m``,
         ``extra_path_pct``, ``avoidance_turn_deg``, ``track_rmse_m``, ``mode_accuracy``,
         ``track_steps``."""
-        return self.metrics_acc.report(self.step_count, self.time, self.flown, self.progress(),
-                                       self._has_plan)
+        return self.metrics_acc.report(
+            self.step_count, self.time, self.flown, self.progress(), self._has_plan
+        )
 
     def snapshot(self, prediction_points: int = PREDICTION_POINTS) -> dict:
         """Everything a renderer or an observer needs, as copies (N aircraft, P tracks,
@@ -439,9 +485,15 @@ class World:
         """
         t = self.tracks
         x = np.array(t.x)
-        tracks = {"owner": t.owner.copy(), "intruder": t.intruder.copy(), "x": x,
-                  "P": np.array(t.P), "mu": np.array(t.mu), "misses": t.misses.copy(),
-                  "age": t.age.copy()}
+        tracks = {
+            "owner": t.owner.copy(),
+            "intruder": t.intruder.copy(),
+            "x": x,
+            "P": np.array(t.P),
+            "mu": np.array(t.mu),
+            "misses": t.misses.copy(),
+            "age": t.age.copy(),
+        }
         los_i, los_j = self.airspace.pair_arrays(LOS)
         nm_i, nm_j = self.airspace.pair_arrays(NMAC)
         snap = {
@@ -470,7 +522,8 @@ class World:
             "mode_names": np.array(t.mode_names, dtype=str),
             "tracks": tracks,
             "predicted": _predict(x, self.avoidance.lookahead, prediction_points)
-            if len(x) else np.zeros((0, prediction_points, 2)),
+            if len(x)
+            else np.zeros((0, prediction_points, 2)),
             "los_pairs": np.stack([los_i, los_j], axis=1),
             "nmac_pairs": np.stack([nm_i, nm_j], axis=1),
         }
