@@ -1,0 +1,256 @@
+"""The four kinds of parts a world is built from, as code: Autopilot, Sensor, Tracker, Resolver.
+
+Each kind is an abstract base class: the methods a part must have (with array shapes and
+units), the parameters it declares (a ``Params`` dataclass, validated by the scenario
+loader like every other key) and the capabilities it declares (class attributes the world
+reads instead of checking names or signatures). A part is a class registered under a name
+with :func:`airspace_sim.registry.register`; the registry checks it against its kind here,
+once, when it is registered (:func:`check`). A plugin may subclass these bases or only fit
+them: the check is on what the class has, not on where it comes from.
+
+Conventions everywhere: metres, seconds, radians; angles counter-clockwise from east
+(negative = turn right); state ``[x, vx, y, vy, Ω]`` (m, m/s, m, m/s, rad/s), n = 5;
+position measurements ``z = [x, y]`` in the world frame. ``N`` is the number of aircraft in
+the world, ``k`` the number an autopilot flies. See ``docs/plugins.md`` for a worked plugin.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from airspace_sim.errors import UserError
+
+
+@dataclass(frozen=True)
+class NoParams:
+    """A part without parameters."""
+
+
+class Autopilot(ABC):
+    """What a group of aircraft flies when neither the resolver nor an agent overrides it.
+
+    One object flies all ``k`` aircraft that share the autopilot's name, with arrays.
+    Constructed as ``cls(members, specs, context, params)``: ``members`` (k,) int indices
+    into the world's aircraft, ``specs`` their ``AircraftSpec`` (k,), ``context`` an
+    :class:`airspace_sim.world.autopilots.AutopilotContext`, ``params`` a ``Params``.
+    ``state`` below is the whole world's ``FlightState`` (N aircraft): index it with
+    ``members``.
+    """
+
+    Params: ClassVar[type] = NoParams
+    #: exposes ``modes`` (k,) int: the true Markov mode flown over the last step
+    has_modes: ClassVar[bool] = False
+    #: flies a plan (a route or a heading to keep): ``progress`` is meaningful and the
+    #: CDA policy may resume toward ``desired_heading`` after an avoidance manoeuvre
+    has_plan: ClassVar[bool] = False
+
+    @abstractmethod
+    def turn_rate(self, state) -> np.ndarray:
+        """(k,) commanded turn rate, rad/s (the world clips it to each aircraft's limit)."""
+
+    @abstractmethod
+    def desired_heading(self, state) -> np.ndarray:
+        """(k,) heading the autopilot wants to settle on, rad; NaN for none."""
+
+    @abstractmethod
+    def after_step(self, state) -> np.ndarray:
+        """(k,) bool: the aircraft finished (it leaves the world). Called after motion."""
+
+    @abstractmethod
+    def progress(self, state) -> np.ndarray:
+        """(k,) planned distance covered so far, m; NaN without a plan."""
+
+
+class Sensor(ABC):
+    """Surveillance: which pairs in range are detected on a scan, and what is measured.
+
+    Constructed as ``cls(spec, dt, params)``: ``spec`` the scenario's ``SensorSpec``,
+    ``dt`` the world step (s), ``params`` a ``Params``.
+    """
+
+    Params: ClassVar[type] = NoParams
+    #: world steps between scans (≥ 1); an instance attribute is fine
+    period_steps: int = 1
+
+    @abstractmethod
+    def scans(self, step: int) -> bool:
+        """Does a scan happen at world step index ``step``?"""
+
+    @abstractmethod
+    def measure(self, owner, intruder, positions, pair_keys, step: int):
+        """Measure the pairs in range.
+
+        owner, intruder : (D,) int aircraft indices; positions : (N, 2) true positions, m;
+        pair_keys : (D,) uint64 counter-based random keys (:mod:`airspace_sim.world.streams`);
+        step : world step index. Returns ``(z (D, 2) m world-frame positions, detected (D,)
+        bool)``.
+        """
+
+
+class Tracker(ABC):
+    """A table of independent filters held in stable slots (one per ownship–intruder track).
+
+    Constructed as ``cls(preset, sigma, params)``: ``preset`` the tracker's dynamics
+    :class:`~airspace_sim.dynamics.presets.Preset` at the world's dt, ``sigma`` the sensor's
+    position noise σ (m), ``params`` a ``Params``. It starts with no live slots.
+
+    Slots are lanes ``0 .. capacity-1``; ``alive`` marks the live ones. :meth:`birth` fills
+    free lanes (growing capacity geometrically when none is free), :meth:`drop` frees lanes;
+    neither moves any other track, so their cost is proportional to the tracks that change.
+    Arrays are indexed by slot; values in free slots are unspecified.
+    """
+
+    Params: ClassVar[type] = NoParams
+    #: has :meth:`predict_modes_at` (mode-conditioned predictions, paper §VI assumption 4)
+    predicts_modes: ClassVar[bool] = False
+    #: :meth:`step` needs the intruders' true states (perfect surveillance trackers)
+    uses_truth: ClassVar[bool] = False
+    #: number of modes M (1 for a single-model filter); an instance attribute is fine
+    n_modes: int = 1
+    #: names of the M modes, e.g. ("straight", "left", "right")
+    mode_names: tuple[str, ...] = ("single",)
+
+    @property
+    @abstractmethod
+    def capacity(self) -> int:
+        """Number of lanes allocated."""
+
+    @property
+    @abstractmethod
+    def alive(self) -> np.ndarray:
+        """(capacity,) bool, read-only: live slots."""
+
+    @abstractmethod
+    def birth(self, x0, P0) -> np.ndarray:
+        """Start k tracks: ``x0`` (k, n), ``P0`` (k, n, n); mode probabilities start at the
+        model's own initial ones. Returns their slots (k,) int."""
+
+    @abstractmethod
+    def drop(self, slots) -> None:
+        """End the tracks in ``slots`` (k,) int (live slots)."""
+
+    @abstractmethod
+    def step(self, z, truth=None) -> None:
+        """One filter cycle for every live slot.
+
+        z : (capacity, m) measurements by slot, m; a row with NaN = no measurement
+        (predict only); rows of free slots are ignored. truth : (capacity, n) true states of
+        each slot's intruder, given only to trackers with ``uses_truth``.
+        """
+
+    @property
+    @abstractmethod
+    def x(self) -> np.ndarray:
+        """(capacity, n) posterior states by slot."""
+
+    @property
+    @abstractmethod
+    def P(self) -> np.ndarray:
+        """(capacity, n, n) posterior covariances by slot."""
+
+    @property
+    @abstractmethod
+    def mu(self) -> np.ndarray:
+        """(capacity, M) mode probabilities by slot (NaN where the tracker has none)."""
+
+    def predict_modes_at(self, steps, slots):
+        """Each mode's model propagated ``steps`` (S,) increasing step counts ahead, for
+        ``slots`` (R,): ``(xs (R, M, S, n), Ps (R, M, S, n, n))``. Only with
+        ``predicts_modes``."""
+        raise NotImplementedError(f"{type(self).__name__} does not predict modes")
+
+
+class Resolver(ABC):
+    """Conflict detection and resolution for many ownships at once (paper §V).
+
+    Constructed as ``cls(params)`` with a ``Params`` instance. The loader fills the
+    ``Params`` fields named ``r_safe`` (m, from ``separation.r_safe``), ``lookahead_s`` (s,
+    ``resolver.lookahead``), ``margin`` (``resolver.margin``) and ``dt`` (s, the world
+    step) from the scenario when the dataclass declares them, then ``resolver.params`` on
+    top; unknown keys and wrong types are refused there.
+    """
+
+    Params: ClassVar[type] = NoParams
+    #: :meth:`resolve` uses ``mode_predictions`` (the world computes them only then)
+    uses_mode_predictions: ClassVar[bool] = False
+    #: :meth:`resolve` uses ``turn_rate`` (judges heading changes as flown)
+    uses_turn_rate: ClassVar[bool] = False
+    #: the advice is "no turn, no conflict" exactly when the current heading passes the CPA
+    #: test :func:`airspace_sim.avoidance.bands.cpa_min_ratio` with the resolver's
+    #: ``params.r_safe``, ``params.lookahead_s`` and ``params.margin`` (so the world runs
+    #: it only on the ownships that fail it)
+    prefilter: ClassVar[bool] = False
+    #: the output carries ``candidates`` and ``band`` (the CDA policy can commit a side)
+    reports_band: ClassVar[bool] = False
+
+    params: object
+
+    @abstractmethod
+    def resolve(
+        self,
+        own_velocity,
+        rel_position,
+        rel_velocity,
+        valid,
+        max_heading_change,
+        *,
+        mode_predictions=None,
+        turn_rate=None,
+    ):
+        """Advice for ``N`` ownships, each with up to ``K`` intruder slots.
+
+        own_velocity (N, 2) m/s; rel_position, rel_velocity (N, K, 2) intruder minus
+        ownship, world frame, m and m/s; valid (N, K) bool; max_heading_change (N,) rad;
+        mode_predictions ``(xs (N, K, M, S, 2), Ps (N, K, M, S, 2, 2), mu (N, K, M))`` or
+        None; turn_rate (N,) rad/s or None. Returns a
+        :class:`airspace_sim.avoidance.resolvers.ResolverOutput` with
+        ``heading_change`` (N,) rad, ``|heading_change| ≤ max_heading_change``, and
+        ``conflict`` (N,) bool.
+        """
+
+
+KINDS: dict[str, type] = {
+    "autopilot": Autopilot,
+    "sensor": Sensor,
+    "tracker": Tracker,
+    "resolver": Resolver,
+}
+
+
+def _abstract_names(base: type) -> list[str]:
+    return sorted(base.__abstractmethods__)
+
+
+def check(kind: str, cls, name: str) -> None:
+    """Raise a one-line :class:`UserError` unless ``cls`` fits the protocol of ``kind``.
+
+    Checks that it is a class, has every method and property of the protocol, that
+    ``Params`` is a dataclass and that the capability flags are booleans.
+    """
+    base = KINDS[kind]
+    where = (
+        f"{kind} {name!r} ({getattr(cls, '__module__', '?')}.{getattr(cls, '__qualname__', cls)})"
+    )
+    if not inspect.isclass(cls):
+        raise UserError(f"{where}: a part must be a class, got {type(cls).__name__}")
+    missing = []
+    for attr in _abstract_names(base):
+        impl = inspect.getattr_static(cls, attr, None)
+        if impl is None or getattr(impl, "__isabstractmethod__", False):
+            missing.append(attr)
+    if missing:
+        raise UserError(
+            f"{where}: does not fit the {base.__name__} protocol: missing {', '.join(missing)}"
+        )
+    params = getattr(cls, "Params", NoParams)
+    if not (inspect.isclass(params) and dataclasses.is_dataclass(params)):
+        raise UserError(f"{where}: Params must be a dataclass, got {params!r}")
+    for flag, value in vars(base).items():
+        if isinstance(value, bool) and not isinstance(getattr(cls, flag, value), bool):
+            raise UserError(f"{where}: {flag} must be True or False, got {getattr(cls, flag)!r}")
