@@ -7,7 +7,7 @@ from hypothesis import strategies as st
 
 from airspace_sim.avoidance import band_search, resume_heading_change, tangent_heading_change
 from airspace_sim.avoidance.bands import CLEAR_TOLERANCE, cpa_min_ratio
-from airspace_sim.avoidance.heading import rotate
+from airspace_sim.geometry import rotate
 
 R = 3000.0
 RES = np.radians(1.0)

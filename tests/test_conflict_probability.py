@@ -8,7 +8,7 @@ from scipy.special import ndtr
 from scipy.stats import ncx2
 
 from airspace_sim.avoidance import conflict_probability, probability_inside_circle
-from airspace_sim.avoidance.heading import rotate
+from airspace_sim.geometry import rotate
 
 R = 3000.0
 

@@ -174,7 +174,7 @@ def ring_min_separation(name, n=8, **params):
     their goal (resume_heading_change) when no conflict is flagged. Returns the minimum
     separation, m."""
     from airspace_sim.avoidance import resume_heading_change
-    from airspace_sim.avoidance.heading import rotate
+    from airspace_sim.geometry import rotate
 
     dt, rate = 2.0, np.radians(3.0)
     ang = np.linspace(0, 2 * np.pi, n, endpoint=False)

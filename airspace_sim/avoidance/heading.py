@@ -20,18 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from airspace_sim.avoidance.escape import escape_side, line_of_sight_angles
-
-
-def wrap_angle(a):
-    """Wrap angles to ``[−π, π)``, radians, elementwise."""
-    return (np.asarray(a, dtype=float) + np.pi) % (2.0 * np.pi) - np.pi
-
-
-def rotate(v, angle):
-    """Rotate vectors ``v`` (..., 2) CCW by ``angle`` (broadcastable to ``(...)``), radians."""
-    v = np.asarray(v, dtype=float)
-    c, s = np.cos(angle), np.sin(angle)
-    return np.stack([c * v[..., 0] - s * v[..., 1], s * v[..., 0] + c * v[..., 1]], axis=-1)
+from airspace_sim.geometry import rotate, wrap_angle
 
 
 def _solve_cos_sin(a, b, c):

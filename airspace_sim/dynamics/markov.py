@@ -83,3 +83,19 @@ def transition_matrix_from_sojourn(sojourn_s, dt: float, switch_probabilities=No
     Pi = np.clip(Pi, 0.0, None)
     Pi /= Pi.sum(axis=1, keepdims=True)
     return validate_transition_matrix(Pi)
+
+
+def mode_cdf(transition_matrix) -> np.ndarray:
+    """Row-wise cumulative Π (M, M), each row divided by its last entry so that it ends at
+    exactly 1 (a zero-probability mode, trailing ones included, is never drawn)."""
+    cdf = np.cumsum(np.asarray(transition_matrix, dtype=float), axis=-1)
+    return cdf / cdf[..., -1:]
+
+
+def next_modes(cdf: np.ndarray, previous, u) -> np.ndarray:
+    """Next modes by inverse-CDF sampling (paper §II, the Markov chain ``Π``).
+
+    cdf : (M, M) from :func:`mode_cdf`; previous : (B,) int modes; u : (B,) uniforms in
+    [0, 1). The next mode is the number of cumulative probabilities ``≤ u``: (B,) int.
+    """
+    return (np.asarray(u)[..., None] >= cdf[np.asarray(previous)]).sum(axis=-1)

@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from airspace_sim.geometry import turn_terms
+
 #: Number of state components ``[x, vx, y, vy, Ω]``.
 N_STATE = 5
 #: Indices of the position components in the state.
@@ -23,17 +25,6 @@ POSITION = (0, 2)
 VELOCITY = (1, 3)
 #: Index of the turn rate in the state.
 TURN_RATE = 4
-
-
-def _sinc_terms(wt: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """``sin(ωT)/ω`` and ``(1 − cos ωT)/ω`` for ``wt = ωT``, exact at ``ω = 0``.
-
-    Uses ``sin(u)/u = np.sinc(u/π)`` and ``(1 − cos u)/u = 2 sin²(u/2)/u``, both smooth
-    through ``u = 0`` (the second written as ``sin(u/2) · sinc(u/2π)``).
-    """
-    s = dt * np.sinc(wt / np.pi)
-    c = dt * np.sin(wt / 2.0) * np.sinc(wt / (2.0 * np.pi))
-    return s, c
 
 
 def transition(turn_rate, dt: float) -> np.ndarray:
@@ -55,7 +46,7 @@ def transition(turn_rate, dt: float) -> np.ndarray:
     """
     w = np.asarray(turn_rate, dtype=float)
     wt = w * dt
-    s, c = _sinc_terms(wt, dt)
+    s, c = turn_terms(w, dt)
     cos, sin = np.cos(wt), np.sin(wt)
     F = np.zeros(w.shape + (N_STATE, N_STATE))
     F[..., 0, 0] = 1.0

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from airspace_sim.dynamics import models
+from airspace_sim.dynamics.markov import mode_cdf, next_modes
 from airspace_sim.dynamics.presets import Preset
 from airspace_sim.errors import UserError
 
@@ -54,12 +55,8 @@ def sample_modes(Pi: np.ndarray, previous: np.ndarray, rng: np.random.Generator)
     exactly 1: a mode with zero probability (including trailing ones, where rounding of the
     cumulative sum could leave the CDF just below 1) is never drawn.
     """
-    Pi = np.asarray(Pi, dtype=float)
     previous = np.asarray(previous)
-    cdf = np.cumsum(Pi, axis=1)
-    cdf /= cdf[:, -1:]
-    u = rng.random(previous.shape)
-    return (u[..., None] >= cdf[previous]).sum(axis=-1)
+    return next_modes(mode_cdf(Pi), previous, rng.random(previous.shape))
 
 
 def initial_states(preset: Preset, n_targets: int, rng: np.random.Generator) -> np.ndarray:
