@@ -32,6 +32,9 @@ class MVPResolver:
     ``min_time`` (s, floor of the CPA time in the push, avoids dividing by ~0; default 1 s).
     """
 
+    prefilter = uses_mode_predictions = uses_turn_rate = reports_band = False
+
+
     def __init__(
         self,
         r_safe: float = 3000.0,
@@ -71,6 +74,7 @@ class MVPResolver:
         max_heading_change,
         mode_predictions=None,
         rel_covariance=None,
+        turn_rate=None,
     ):
         vo = np.asarray(own_velocity, dtype=float).reshape(-1, 2)
         n = vo.shape[0]

@@ -374,7 +374,7 @@ def test_left_commitment_returns_right_once_the_right_is_clear():
     # stays right even when the left opens up.
     from airspace_sim.scenarios import load
 
-    avoid = World(load("demo")).avoidance
+    avoid = World(load("demo")).policy
     assert avoid.preference == "right"
     cand = np.radians([[10.0, -10.0, 20.0, -20.0]] * 3)  # (n, C): left +, right -
     band = np.array(
@@ -410,11 +410,13 @@ def test_resume_margin_shrinks_over_resume_decay_s(off_route_s, clear):
     # extra) with r_safe 3000, margin 0.1 and extra = 1.5·(1 − off/30): 7800 m at 0 s,
     # 6300 m at 10 s (blocked), 5550 m at 15 s (clear), 3300 m from 30 s on.
     from airspace_sim.scenarios import load
-    from airspace_sim.world.control import Avoidance, Encounters
+    from airspace_sim.world.control import Encounters
+    from airspace_sim.world.policy import AvoidancePolicy
 
     sc = load("dense_random", ["resolver.resume_decay_s=30.0", "resolver.lookahead=120.0"])
-    avoid = Avoidance(sc, dt=1.0)
+    avoid = AvoidancePolicy(sc, 1.0, np.ones(2, bool), np.ones(2, bool))
     assert (avoid.resume_margin, avoid.margin, avoid.r_safe) == (1.5, 0.1, 3000.0)
+    avoid.off_route_s = np.array([off_route_s, 0.0])
     enc = Encounters(
         np.array([0]),
         np.array([[0]]),
@@ -423,9 +425,7 @@ def test_resume_margin_shrinks_over_resume_decay_s(off_route_s, clear):
         np.array([[True]]),
     )
     velocities = np.array([[200.0, 0.0], [200.0, 0.0]])
-    got = avoid.resume_clear(
-        enc, velocities, np.zeros(1), np.full(2, np.radians(3.0)), np.array([off_route_s, 0.0])
-    )
+    got = avoid._resume_clear(enc, velocities, np.zeros(1), np.full(2, np.radians(3.0)))
     assert got.tolist() == [clear]
 
 
@@ -456,40 +456,36 @@ def test_bands_probabilistic_gets_the_tracks_mode_predictions():
         )
     )
     seen = []
-    resolve = world.avoidance.resolver.resolve
+    resolve = world.policy.resolver.resolve
 
     def spy(*args, **kw):
         seen.append(kw.get("mode_predictions"))
         return resolve(*args, **kw)
 
-    world.avoidance.resolver.resolve = spy
+    world.policy.resolver.resolve = spy
     world.run(20)
     assert seen and all(p is not None for p in seen)
-    enc = world._enc
-    xs, Ps, mu = world.mode_predictions(enc, world.avoidance.prediction_times_s)
+    from airspace_sim.world.policy import mode_predictions
+
+    view = world.tracks.view()
+    enc = world.policy._encounters
+    t = np.array([10.0, 20.0, 30.0])
+    xs, Ps, mu = mode_predictions(world.tracks, view, enc, world.positions, world.velocities, 1.0, t)
     n_own, K = enc.valid.shape
     assert xs.shape == (n_own, K, 3, 3, 2) and Ps.shape == (n_own, K, 3, 3, 2, 2)
     np.testing.assert_allclose(mu[enc.valid].sum(axis=-1), 1.0)
-    # mode 0 is constant velocity: intruder x + v·t from its mode-0 posterior, minus the
-    # ownship flying straight (closed form)
-    t = np.array([10.0, 20.0, 30.0])
-    xm = np.asarray(world.tracks.filter.x_modes)
     o, k = np.argwhere(enc.valid)[0]
-    row = world._enc_track_rows[enc.rows[o, k]]
-    own = enc.owners[o]
+    row, own = enc.rows[o, k], enc.owners[o]
     # the slot is the track of that ownship, at that relative position
-    assert world.tracks.owner[row] == own
-    np.testing.assert_allclose(
-        world.tracks.x[row, (0, 2)] - world.positions[own], enc.rel_position[o, k]
-    )
-    x0 = xm[row, 0]
-    expect = (
-        np.array([x0[0], x0[2]])[None]
-        + t[:, None] * np.array([x0[1], x0[3]])[None]
-        - world.positions[own]
-        - t[:, None] * world.velocities[own]
-    )
-    np.testing.assert_allclose(xs[o, k, 0], expect, rtol=1e-9, atol=1e-6)
+    assert view.owner[row] == own
+    np.testing.assert_allclose(view.x[row, (0, 2)] - world.positions[own], enc.rel_position[o, k])
+    # mode 0 is constant velocity and the ownship flies straight: the relative prediction is
+    # a + b·t exactly (equal differences over equal times), and at t → 0 it starts near the
+    # track's relative position
+    d1, d2 = xs[o, k, 0, 1] - xs[o, k, 0, 0], xs[o, k, 0, 2] - xs[o, k, 0, 1]
+    np.testing.assert_allclose(d1, d2, rtol=1e-9, atol=1e-6)
+    start = xs[o, k, 0, 0] - d1  # t = 0
+    assert np.hypot(*(start - enc.rel_position[o, k])) < 500.0
     assert np.all(np.diff(Ps[o, k, 0, :, 0, 0]) > 0)  # uncertainty grows ahead
 
 
@@ -515,10 +511,10 @@ def test_off_route_time_stays_zero_for_aircraft_that_never_leave_their_route():
         for i in range(4)
     ]
     world = World(from_dict({"name": "apart", "aircraft": aircraft, "sensor": {"range": 5000.0}}))
-    assert world.avoidance.overrides
+    assert world.policy.overrides
     for _ in range(60):
         world.step()
-        assert np.all(world.off_route_s == 0.0)
+        assert np.all(world.policy.off_route_s == 0.0)
 
 
 def test_extra_path_pct_is_nan_without_planned_paths():

@@ -85,6 +85,9 @@ def _arrays(own_velocity, rel_position, rel_velocity, valid, max_heading_change)
 class NoResolver:
     """Never turns; ``conflict`` is the CPA test of ``"bands"`` at the current heading."""
 
+    prefilter = uses_mode_predictions = uses_turn_rate = reports_band = False
+
+
     def __init__(self, r_safe=DEFAULT_R_SAFE, lookahead_s=120.0, margin=0.0):
         self.r_safe, self.lookahead_s, self.margin = float(r_safe), float(lookahead_s), margin
 
@@ -97,6 +100,7 @@ class NoResolver:
         max_heading_change,
         mode_predictions=None,
         rel_covariance=None,
+        turn_rate=None,
     ):
         vo, r, v, valid, mx = _arrays(
             own_velocity, rel_position, rel_velocity, valid, max_heading_change
@@ -123,6 +127,9 @@ class SeedResolver:
     world-frame heading change instead of ``θ``).
     """
 
+    prefilter = uses_mode_predictions = uses_turn_rate = reports_band = False
+
+
     def __init__(
         self, r_safe=DEFAULT_R_SAFE, dt=0.1, horizon=3, max_angle=np.pi / 4, world_frame=False
     ):
@@ -138,6 +145,7 @@ class SeedResolver:
         max_heading_change,
         mode_predictions=None,
         rel_covariance=None,
+        turn_rate=None,
     ):
         vo, r, v, valid, mx = _arrays(
             own_velocity, rel_position, rel_velocity, valid, max_heading_change
@@ -177,6 +185,10 @@ class BandsResolver:
     candidate is judged as flown, turning at that rate until reached, then straight; False:
     as if the heading changed at once).
     """
+
+    prefilter = uses_turn_rate = reports_band = True
+    uses_mode_predictions = False
+
 
     def __init__(
         self,
@@ -242,7 +254,7 @@ class ProbabilisticBandsResolver(BandsResolver):
     threshold, and that bound (below the threshold) elsewhere.
     """
 
-    #: the world computes mode predictions only for resolvers that say they use them
+    prefilter = False
     uses_mode_predictions = True
 
     def __init__(self, threshold=0.05, **params):

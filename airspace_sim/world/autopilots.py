@@ -66,6 +66,9 @@ def _toward(target_heading, state, members):
 class StraightAutopilot:
     """Holds the initial heading (and turns back to it after an avoidance manoeuvre)."""
 
+    has_plan = True
+    has_modes = False
+
     def __init__(self, members, specs, context: AutopilotContext):
         self.members = np.asarray(members, dtype=np.int64)
         self.heading = np.radians([s.heading_deg for s in specs]).astype(float)
@@ -94,6 +97,9 @@ class RouteAutopilot:
     last waypoint the aircraft has *finished* and leaves the world. With no waypoints it
     behaves like ``"straight"``.
     """
+
+    has_plan = True
+    has_modes = False
 
     def __init__(self, members, specs, context: AutopilotContext):
         self.members = m = np.asarray(members, dtype=np.int64)
@@ -165,6 +171,9 @@ class MarkovAutopilot:
     ``modes[a]`` is the mode in effect over the last step (truth convention of
     :mod:`airspace_sim.dynamics.truth`).
     """
+
+    has_plan = False
+    has_modes = True
 
     def __init__(self, members, specs, context: AutopilotContext):
         self.members = np.asarray(members, dtype=np.int64)

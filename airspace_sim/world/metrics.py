@@ -33,10 +33,19 @@ import math
 
 import numpy as np
 
+from airspace_sim.world.bodies import LOS, NMAC, RANGE
 
-class Metrics:
+
+class WorldMetrics:
+    """The accumulators of one world run (definitions in the module docstring).
+
+    n aircraft; r_safe, nmac : separation and NMAC distances, m; dt : world step, s.
+    """
+
     def __init__(self, n: int, r_safe: float, nmac: float, dt: float):
         self.n, self.r_safe, self.nmac, self.dt = n, float(r_safe), float(nmac), float(dt)
+        self.flown = np.zeros(n)  # m flown per aircraft
+        self._prev_contacts = None  # positions, LoS and NMAC keys at the previous step
         self.los_events = 0
         self.nmac_events = 0
         self.los_keys: set[int] = set()
@@ -53,19 +62,12 @@ class Metrics:
         self.mode_samples = 0
         self._prev_conflict = np.zeros(n, dtype=bool)
 
-    def contacts(
-        self,
-        positions,
-        los_keys,
-        los_began,
-        nmac_keys,
-        nmac_began,
-        range_keys,
-        prev_positions=None,
-        prev_los_keys=None,
-        prev_nmac_keys=None,
-    ):
-        """Record this step's pair sets (sorted keys ``i·N + j``) and new episodes.
+    def contacts(self, positions, pairs: dict, began: dict):
+        """Record this step's pair sets and new episodes.
+
+        positions : (N, 2) m; pairs : set → (P,) sorted keys ``i·N + j`` (``i < j``) of the
+        pairs overlapping now, began : set → (E, 2) pairs that began overlapping in the last
+        step (:class:`~.bodies.Airspace` ``pairs`` / ``began``; sets LOS, NMAC, RANGE).
 
         Pymunk's sets are sampled at step instants; two aircraft closing at 460 m/s can jump
         over the 152 m NMAC circle in a 1 s step. So for pairs in LoS now or at the previous
@@ -75,6 +77,12 @@ class Metrics:
         neither) counts as an NMAC event.
         """
         n = max(self.n, 1)
+        los_keys, nmac_keys, range_keys = pairs[LOS], pairs[NMAC], pairs[RANGE]
+        prev_positions = prev_los_keys = prev_nmac_keys = None
+        if self._prev_contacts is not None:
+            prev_positions, prev_los_keys, prev_nmac_keys = self._prev_contacts
+        self._prev_contacts = (positions.copy(), los_keys.copy(), nmac_keys.copy())
+        los_began, nmac_began = began[LOS], began[NMAC]
         self.los_events += len(los_began)
         self.nmac_events += len(nmac_began)
         if prev_positions is not None and (los_keys.size or prev_los_keys.size):
@@ -111,8 +119,11 @@ class Metrics:
         self.conflict_steps += int(np.count_nonzero(conflict))
         self._prev_conflict = conflict.copy()
 
-    def avoidance_turn(self, turned: np.ndarray, following_advice: np.ndarray):
-        self.avoid_turn += np.where(following_advice, np.abs(turned), 0.0)
+    def motion(self, travelled, turned, following_policy):
+        """One step flown: ``travelled`` (N,) m, ``turned`` (N,) heading change, rad;
+        ``following_policy`` (N,) bool, the turn was the CDA policy's."""
+        self.flown += travelled
+        self.avoid_turn += np.where(following_policy, np.abs(turned), 0.0)
 
     def tracking(self, track_pos, true_pos, mode_est=None, mode_true=None):
         """Add (P, 2) estimated vs true positions; optional (Q,) modes to compare."""
@@ -124,8 +135,9 @@ class Metrics:
             self.mode_hits += int(np.count_nonzero(mode_est == mode_true))
             self.mode_samples += len(mode_est)
 
-    def report(self, steps: int, time: float, flown, progress, has_plan) -> dict:
-        extra = np.where(has_plan, np.asarray(flown) - np.nan_to_num(progress), 0.0)
+    def report(self, steps: int, time: float, progress, has_plan) -> dict:
+        """The metrics dict; progress (N,) planned distance covered, m; has_plan (N,) bool."""
+        extra = np.where(has_plan, self.flown - np.nan_to_num(progress), 0.0)
         planned = float(np.sum(np.where(has_plan, np.nan_to_num(progress), 0.0)))
         return {
             "steps": int(steps),

@@ -102,6 +102,28 @@ class TrackTable:
         )
 
     # ------------------------------------------------------------------ views
+    def view(self):
+        """Dense arrays over the live tracks (slots = rows here)."""
+        from types import SimpleNamespace
+
+        return SimpleNamespace(
+            slots=np.arange(len(self)),
+            owner=self.owner,
+            intruder=self.intruder,
+            misses=self.misses,
+            age=self.age,
+            x=self.x,
+            P=self.P,
+            mu=self.mu,
+        )
+
+    @property
+    def predicts_modes(self) -> bool:
+        return self.filter is not None and hasattr(self.filter, "predict_modes_at")
+
+    def predict_modes_at(self, steps, slots):
+        return self.filter.predict_modes_at(steps, slots)
+
     def __len__(self) -> int:
         return int(self.owner.size)
 

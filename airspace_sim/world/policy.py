@@ -1,0 +1,304 @@
+"""The world's conflict detection and avoidance (CDA) policy: one object, all of its state.
+
+:class:`AvoidancePolicy` owns everything the CDA rotation (paper §V) needs between steps:
+the advice and conflict flags of every aircraft, the committed turn side, the time since the
+side was last needed, the time spent off the route and the encounters of the last
+detection (for the resume check). The world calls it twice per step and nothing else
+reaches into it:
+
+- :meth:`AvoidancePolicy.override` (commands phase): an avoiding ownship in conflict turns
+  by its advice; one that is clear turns back toward its autopilot's desired heading only if
+  that turn keeps clear, else it holds its heading;
+- :meth:`AvoidancePolicy.advise` (detection phase): the confirmed tracks of every tracking
+  ownship are gathered into per-ownship arrays (:func:`.control.gather`), the resolver runs
+  on them (asking the track table for mode predictions when the resolver uses them), and
+  the turn side is committed.
+
+Policy knobs live in ``scenario.resolver`` (``search_deg``, ``turn_preference``,
+``confirm_s``, ``resume_margin``, ``resume_decay_s``, ``side_memory_s``,
+``probability_horizon_s``, ``probability_samples``); why they have the values they have is
+in ``docs/tuning.md``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from airspace_sim.avoidance import resume_heading_change
+from airspace_sim.avoidance.bands import CLEAR_TOLERANCE, cpa_min_ratio
+from airspace_sim.world.control import Encounters, build_resolver, gather, reachable
+
+#: rad: an autopilot turn smaller than this per step is "on course" (a route autopilot's
+#: atan2 gives ~1e-16 rad/s on a straight leg, which must not count as turning back)
+TURN_TOLERANCE = 1e-9
+
+
+class AvoidancePolicy:
+    """CDA for all N aircraft of a world (see the module docstring).
+
+    Parameters
+    ----------
+    scenario : the validated :class:`~airspace_sim.scenarios.Scenario`.
+    dt : world step, s.
+    avoid : (N,) bool, aircraft that fly the advice (``AircraftSpec.avoid`` and not agents).
+    tracking : (N,) bool, aircraft whose tracks are gathered and advised (avoiding
+        ownships and RL agents, whose observation holds the advice).
+
+    Attributes (read-only outside this class)
+    -----------------------------------------
+    advice : (N,) rad, heading change for the coming step (CCW positive).
+    conflict : (N,) bool, a conflict is predicted at the current heading.
+    side : (N,) committed turn side, −1 right, +1 left, 0 none.
+    off_route_s : (N,) s since the aircraft last flew its autopilot without a pending turn
+        back.
+    following : (N,) bool, the aircraft flew the policy (advice or hold) in the last step.
+    r_safe, lookahead_s, margin : the resolver's clear radius ``r_safe·(1 + margin)`` and
+        look-ahead, m, s, -.
+    """
+
+    PREFERENCES = ("right", "nearest", "none")
+
+    def __init__(self, scenario, dt: float, avoid, tracking):
+        spec = scenario.resolver
+        self.resolver = build_resolver(scenario, dt)
+        self.dt = float(dt)
+        self.r_safe = float(scenario.separation.r_safe)
+        self.lookahead_s = float(spec.lookahead)
+        self.margin = float(spec.margin)
+        self.search_range = math.radians(float(spec.search_deg))
+        self.resume_margin = float(spec.resume_margin)
+        self.resume_decay_s = None if spec.resume_decay_s is None else float(spec.resume_decay_s)
+        self.confirm_steps = math.ceil(float(spec.confirm_s) / dt - 1e-9)
+        self.preference = spec.turn_preference
+        self.memory_steps = max(math.ceil(float(spec.side_memory_s) / dt - 1e-9), 1)
+        horizon = (
+            self.lookahead_s if spec.probability_horizon_s is None else spec.probability_horizon_s
+        )
+        S = int(spec.probability_samples)
+        #: s ahead at which mode predictions are taken (resolvers that use them)
+        self.prediction_times_s = float(horizon) * np.arange(1, S + 1) / S
+        #: "none" only reports conflicts; every other resolver's advice is flown
+        self.overrides = spec.kind != "none"
+
+        self.avoid = np.asarray(avoid, dtype=bool)
+        self.tracking = np.asarray(tracking, dtype=bool)
+        n = self.avoid.size
+        self.advice = np.zeros(n)
+        self.conflict = np.zeros(n, dtype=bool)
+        self.side = np.zeros(n)
+        self.off_route_s = np.zeros(n)
+        self.following = np.zeros(n, dtype=bool)
+        self._clear_for = np.zeros(n, dtype=np.int64)
+        self._encounters = Encounters.empty()
+
+    # ------------------------------------------------------------- commands
+    def override(self, rate, desired, active, velocities, max_heading_change):
+        """Commands phase: the autopilots' turn rates with the CDA policy applied.
+
+        rate : (N,) rad/s from the autopilots; desired : (N,) rad, their desired headings
+        (NaN: none); active : (N,) bool; velocities : (N, 2) m/s; max_heading_change : (N,)
+        rad per step. Returns the new (N,) rad/s. Updates ``following`` and ``off_route_s``.
+        """
+        n = rate.size
+        follow = np.zeros(n, dtype=bool)
+        resuming = np.zeros(n, dtype=bool)
+        out = rate
+        if self.overrides:
+            flying = self.avoid & active
+            follow = flying & self.conflict
+            out = np.where(follow, self.advice / self.dt, rate)
+            # resume toward the autopilot's heading only if that turn is clear
+            resuming = (
+                flying
+                & ~self.conflict
+                & np.isfinite(desired)
+                & (np.abs(rate) * self.dt > TURN_TOLERANCE)
+            )
+            enc = self._encounters
+            if resuming.any() and enc.owners.size:
+                sub = enc.subset(resuming[enc.owners])
+                if sub.owners.size:
+                    turn = rate[sub.owners] * self.dt
+                    clear = self._resume_clear(sub, velocities, turn, max_heading_change)
+                    hold = sub.owners[~clear]
+                    out[hold] = 0.0
+                    follow[hold] = True
+        self.following = follow
+        self.off_route_s = np.where(follow | resuming, self.off_route_s + self.dt, 0.0)
+        return out
+
+    def _resume_clear(self, enc: Encounters, velocities, turn, max_heading_change):
+        """(n_own,) bool: is the heading change ``turn`` (n_own,) rad clear for enc's
+        ownships, by ``r_safe·(1 + margin + extra)``, ``extra = resume_margin`` shrinking
+        linearly to 0 over ``resume_decay_s`` off the route."""
+        vo = velocities[enc.owners]
+        desired = np.arctan2(vo[:, 1], vo[:, 0]) + turn
+        extra = np.full(enc.owners.size, self.resume_margin)
+        if self.resume_decay_s is not None:
+            extra *= np.clip(1.0 - self.off_route_s[enc.owners] / self.resume_decay_s, 0.0, 1.0)
+        _, clear = resume_heading_change(
+            vo,
+            desired,
+            enc.rel_position,
+            enc.rel_velocity,
+            enc.valid,
+            max_heading_change[enc.owners],
+            r_safe=self.r_safe,
+            lookahead_s=self.lookahead_s,
+            margin=self.margin + extra,
+        )
+        return np.asarray(clear, dtype=bool)
+
+    # ------------------------------------------------------------ detection
+    def advise(self, tracks, positions, velocities, active, max_heading_change):
+        """Detection phase: the resolver on every tracking ownship's confirmed tracks.
+
+        tracks : the world's :class:`~.trackers.TrackTable`; positions, velocities : (N, 2)
+        true own states, m, m/s; active : (N,) bool; max_heading_change : (N,) rad per step.
+        Sets and returns ``(advice (N,) rad, conflict (N,) bool)``.
+        """
+        n = self.advice.size
+        view = tracks.view()
+        ok = view.age >= self.confirm_steps  # a two-point track's first velocities are poor
+        enc = gather(view.owner, view.x, positions, velocities, self.tracking & active, keep=ok)
+        self._encounters = enc
+        advice = np.zeros(n)
+        conflict = np.zeros(n, dtype=bool)
+        res = self.resolver
+        if enc.owners.size and res.prefilter:
+            enc = self._prefilter(enc, velocities)
+        if enc.owners.size:
+            mx = max_heading_change[enc.owners]
+            pred = None
+            if res.uses_mode_predictions and tracks.predicts_modes:
+                pred = mode_predictions(
+                    tracks, view, enc, positions, velocities, self.dt, self.prediction_times_s
+                )
+            out = res.resolve(
+                velocities[enc.owners],
+                enc.rel_position,
+                enc.rel_velocity,
+                enc.valid,
+                np.maximum(mx, self.search_range),
+                mode_predictions=pred,
+                turn_rate=mx / self.dt if res.uses_turn_rate else None,
+            )
+            psi = np.asarray(out.heading_change, dtype=float)
+            c = np.asarray(out.conflict, dtype=bool)
+            if res.reports_band and self.preference != "none":
+                psi, self.side[enc.owners] = self._commit(
+                    psi,
+                    c,
+                    self.side[enc.owners],
+                    np.asarray(out.candidates),
+                    np.asarray(out.band),
+                    None if out.min_ratio is None else np.asarray(out.min_ratio),
+                )
+            advice[enc.owners] = np.clip(psi, -mx, mx)
+            conflict[enc.owners] = c
+        conflict &= active
+        # forget the committed side once clear for side_memory_s
+        self._clear_for = np.where(conflict, 0, self._clear_for + 1)
+        self.side[self._clear_for >= self.memory_steps] = 0.0
+        self.advice, self.conflict = advice, conflict
+        return advice, conflict
+
+    def _prefilter(self, enc: Encounters, velocities) -> Encounters:
+        """Only the ownships whose current heading fails the resolver's own CPA test, and on
+        them only the intruders some heading could bring within the clear radius."""
+        clear_radius = self.r_safe * (1.0 + self.margin)
+        ratio0 = cpa_min_ratio(
+            velocities[enc.owners],
+            enc.rel_position,
+            enc.rel_velocity,
+            enc.valid,
+            np.zeros((enc.owners.size, 1)),
+            clear_radius,
+            self.lookahead_s,
+        )[:, 0]
+        enc = enc.subset(~(ratio0 >= 1.0 - CLEAR_TOLERANCE))
+        return enc.compact(reachable(enc, velocities[enc.owners], clear_radius, self.lookahead_s))
+
+    def _commit(self, psi, conflict, side, cand, band, min_ratio=None):
+        """Heading changes and sides under the turn preference.
+
+        ``psi`` (n,) resolver choices, rad; ``conflict`` (n,) bool; ``side`` (n,) committed
+        sides; ``cand`` (n, C) candidate heading changes sorted by the resolver's preference,
+        ``band`` (n, C) clear flags; ``min_ratio`` (n, C) or None. ``"right"`` takes the
+        nearest clear heading on the right if there is one within the search range (else on
+        the left), ``"nearest"`` the resolver's choice; afterwards the committed side is
+        kept while it has a clear heading. When it has none, a resolver that reports
+        ``min_ratio`` gets the best heading on that side and the side is kept; otherwise
+        the resolver's choice is used and the side follows it. Under ``"right"`` a left
+        commitment is only the fallback: back to the right as soon as a strictly right
+        heading is clear. Returns ``(psi (n,), side (n,))``.
+        """
+        rows = np.arange(psi.size)
+
+        def first_clear(mask):
+            ok = band & mask
+            return ok.any(axis=1), cand[rows, np.argmax(ok, axis=1)]
+
+        new_side = side.copy()
+        fresh = conflict & (side == 0)
+        if self.preference == "right":
+            has_r, pick_r = first_clear(cand <= 0)
+            has_l, pick_l = first_clear(cand >= 0)
+            psi = np.where(fresh & has_r, pick_r, np.where(fresh & ~has_r & has_l, pick_l, psi))
+            new_side = np.where(
+                fresh, np.where(has_r, -1.0, np.where(has_l, 1.0, np.sign(psi))), new_side
+            )
+            # one ownship turning left and one right can turn into each other
+            back = conflict & (side > 0) & first_clear(cand < 0)[0]
+            side = np.where(back, -1.0, side)
+            new_side = np.where(back, -1.0, new_side)
+        else:
+            new_side = np.where(fresh, np.sign(psi), new_side)
+        kept = conflict & (side != 0)
+        on_side = cand * side[:, None] >= 0
+        has_s, pick_s = first_clear(on_side)
+        psi = np.where(kept & has_s, pick_s, psi)
+        if min_ratio is not None:
+            # two ownships flipping sides at once can turn into each other: keep the side
+            score = np.where(on_side & ~np.isnan(cand), min_ratio, -np.inf)
+            best = cand[rows, np.argmax(score, axis=1)]
+            psi = np.where(kept & ~has_s, best, psi)
+        else:
+            new_side = np.where(kept & ~has_s, np.sign(psi), new_side)
+        return psi, np.where(conflict, new_side, side)
+
+
+def mode_predictions(
+    tracks, view, enc: Encounters, positions, velocities, dt, times_s, chunk: int = 4096
+):
+    """Relative mode-conditioned predictions of the tracks in ``enc`` (paper §VI, 4).
+
+    tracks : a :class:`~.trackers.TrackTable` whose tracker predicts modes; view : its
+    :meth:`~.trackers.TrackTable.view` that ``enc.rows`` index; positions, velocities : (N, 2) own
+    true states; dt : world step, s; times_s : (S,) s ahead, rounded to whole steps.
+    Returns ``(xs, Ps, mu)``: (n_own, K, M, S', 2) intruder-minus-ownship positions, m, the
+    ownship flying straight; (n_own, K, M, S', 2, 2) their covariances, m²; (n_own, K, M)
+    mode probabilities; zeros in unused slots. S' is the number of distinct whole steps.
+    Rows are predicted ``chunk`` at a time so memory stays bounded.
+    """
+    steps = np.unique(np.maximum(1, np.rint(np.asarray(times_s) / dt))).astype(np.int64)
+    t = steps * dt
+    n_own, K = enc.valid.shape
+    M = tracks.n_modes
+    xs = np.zeros((n_own, K, M, steps.size, 2))
+    Ps = np.zeros((n_own, K, M, steps.size, 2, 2))
+    mu = np.zeros((n_own, K, M))
+    oi, ki = np.nonzero(enc.valid)
+    rows = enc.rows[oi, ki]
+    slots = view.slots[rows]
+    for a in range(0, slots.size, chunk):
+        sl = slice(a, a + chunk)
+        x, P = tracks.predict_modes_at(steps, slots[sl])
+        own = enc.owners[oi[sl]]
+        straight = positions[own][:, None, :] + t[None, :, None] * velocities[own][:, None, :]
+        xs[oi[sl], ki[sl]] = x[..., (0, 2)] - straight[:, None]
+        Ps[oi[sl], ki[sl]] = P[..., (0, 2), :][..., (0, 2)]
+        mu[oi[sl], ki[sl]] = view.mu[rows[sl]]
+    return xs, Ps, mu
