@@ -34,7 +34,6 @@ class MVPResolver:
 
     prefilter = uses_mode_predictions = uses_turn_rate = reports_band = False
 
-
     def __init__(
         self,
         r_safe: float = 3000.0,

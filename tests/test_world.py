@@ -470,7 +470,9 @@ def test_bands_probabilistic_gets_the_tracks_mode_predictions():
     view = world.tracks.view()
     enc = world.policy._encounters
     t = np.array([10.0, 20.0, 30.0])
-    xs, Ps, mu = mode_predictions(world.tracks, view, enc, world.positions, world.velocities, 1.0, t)
+    xs, Ps, mu = mode_predictions(
+        world.tracks, view, enc, world.positions, world.velocities, 1.0, t
+    )
     n_own, K = enc.valid.shape
     assert xs.shape == (n_own, K, 3, 3, 2) and Ps.shape == (n_own, K, 3, 3, 2, 2)
     np.testing.assert_allclose(mu[enc.valid].sum(axis=-1), 1.0)

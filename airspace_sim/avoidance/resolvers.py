@@ -87,7 +87,6 @@ class NoResolver:
 
     prefilter = uses_mode_predictions = uses_turn_rate = reports_band = False
 
-
     def __init__(self, r_safe=DEFAULT_R_SAFE, lookahead_s=120.0, margin=0.0):
         self.r_safe, self.lookahead_s, self.margin = float(r_safe), float(lookahead_s), margin
 
@@ -128,7 +127,6 @@ class SeedResolver:
     """
 
     prefilter = uses_mode_predictions = uses_turn_rate = reports_band = False
-
 
     def __init__(
         self, r_safe=DEFAULT_R_SAFE, dt=0.1, horizon=3, max_angle=np.pi / 4, world_frame=False
@@ -188,7 +186,6 @@ class BandsResolver:
 
     prefilter = uses_turn_rate = reports_band = True
     uses_mode_predictions = False
-
 
     def __init__(
         self,
