@@ -408,3 +408,33 @@ def test_band_search_with_turn_rate_sees_the_turn_path():
     )
     ok = res.band[0] & (res.candidates[0] == -np.pi / 2)
     assert not ok.any()
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_first_clear_search_equals_the_full_band(seed):  # noqa: D103
+    # band_search(full=False) scans candidates only until each side has a clear one; its
+    # choice, first clear candidates and (where a side has none) min ratios must equal the
+    # full evaluation of every candidate against every intruder
+    rng = np.random.default_rng(seed)
+    n, k = 300, 12
+    heading = rng.uniform(-np.pi, np.pi, n)
+    vo = 230.0 * np.stack([np.cos(heading), np.sin(heading)], axis=1)
+    r = rng.uniform(-30000.0, 30000.0, (n, k, 2))
+    vi = rng.uniform(-300.0, 300.0, (n, k, 2))
+    valid = rng.random((n, k)) < 0.8
+    mx = np.radians(rng.choice([3.0, 45.0, 90.0, 180.0], n))
+    full = band_search(vo, r, vi - vo[:, None], valid, mx, 3000.0, 120.0, 0.1)
+    fast = band_search(vo, r, vi - vo[:, None], valid, mx, 3000.0, 120.0, 0.1, full=False)
+    assert fast.band is None
+    np.testing.assert_array_equal(fast.heading_change, full.heading_change)
+    np.testing.assert_array_equal(fast.conflict, full.conflict)
+    np.testing.assert_array_equal(fast.first_clear, full.first_clear)
+    np.testing.assert_array_equal(fast.best_blocked, full.best_blocked)
+    blocked = full.first_clear[:, :2] < 0
+    assert blocked.any() and (~blocked).any()  # both kinds of sides occur
+    assert ((full.first_clear[:, :2] < 0) == (full.best_blocked >= 0)).all()
+    # the best blocked candidate is the (first) maximum of the full min ratio on its side
+    for col, on_side in enumerate((full.candidates <= 0, full.candidates >= 0)):
+        score = np.where(on_side & ~np.isnan(full.candidates), full.min_ratio, -np.inf)
+        rows = np.flatnonzero(blocked[:, col])
+        np.testing.assert_array_equal(full.best_blocked[rows, col], np.argmax(score[rows], axis=1))

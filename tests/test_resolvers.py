@@ -131,7 +131,7 @@ def test_bands_matches_band_search_and_defaults():
     ref = band_search(vo, r, v, valid, mx, R, 120.0, 0.1)
     assert np.array_equal(out.heading_change, ref.heading_change)
     assert np.array_equal(out.conflict, ref.conflict)
-    assert out.band.shape == out.candidates.shape
+    np.testing.assert_array_equal(out.first_clear, ref.first_clear)
     assert out.heading_change[0] < 0  # head-on: right turn
     custom = make("bands", r_safe=1000.0, lookahead_s=30.0, margin=0.0).resolve(vo, r, v, valid, mx)
     ref = band_search(vo, r, v, valid, mx, 1000.0, 30.0, 0.0)
@@ -217,8 +217,8 @@ def test_bands_model_turn_uses_the_callers_turn_rate():
     valid = np.ones((1, 1), bool)
     mx = np.array([np.pi / 2])
     w = np.array([np.radians(3.0)])
-    plain = make("bands", r_safe=3000.0, margin=0.0)
-    flown = make("bands", r_safe=3000.0, margin=0.0, model_turn=True)
+    plain = make("bands", r_safe=3000.0, margin=0.0, full_band=True)
+    flown = make("bands", r_safe=3000.0, margin=0.0, model_turn=True, full_band=True)
     # model_turn off (the default): turn_rate is accepted and ignored
     a = plain.resolve(vo, r, v, valid, mx, turn_rate=w)
     b = plain.resolve(vo, r, v, valid, mx)
@@ -233,7 +233,7 @@ def test_bands_model_turn_uses_the_callers_turn_rate():
 
 def test_bands_reports_min_ratio_consistent_with_band():
     vo, r, v, valid = scene()
-    out = make("bands").resolve(vo, r, v, valid, np.full(len(vo), np.pi / 2))
+    out = make("bands", full_band=True).resolve(vo, r, v, valid, np.full(len(vo), np.pi / 2))
     assert out.min_ratio is not None and out.min_ratio.shape == out.band.shape
     used = ~np.isnan(out.candidates)
     np.testing.assert_array_equal(out.band, used & (out.min_ratio >= 1.0 - 1e-9))

@@ -387,7 +387,9 @@ def test_left_commitment_returns_right_once_the_right_is_clear():
     side = np.array([1.0, 1.0, -1.0])
     psi = np.zeros(3)
     conflict = np.ones(3, dtype=bool)
-    out, new_side = avoid._commit(psi, conflict, side, cand, band)
+    from airspace_sim.avoidance.bands import first_clear_from_band
+
+    out, new_side = avoid._commit(psi, conflict, side, cand, first_clear_from_band(cand, band))
     np.testing.assert_array_equal(new_side, [-1.0, 1.0, -1.0])
     np.testing.assert_allclose(out, np.radians([-10.0, 10.0, -20.0]))
 

@@ -49,15 +49,27 @@ class BandResult:
     candidates : (N, C) candidate heading changes, rad, sorted by preference
         (``|ψ|``, right turn first); NaN for unused slots.
     band : (N, C) bool, candidate is clear (the band to draw); False for unused slots.
+        ``None`` from ``band_search(..., full=False)``.
     min_ratio : (N, C) minimum over intruders of CPA distance / radius (``inf`` with no
-        intruder, ``-inf`` for unused slots).
+        intruder, ``-inf`` for unused slots); ``None`` from ``band_search(..., full=False)``.
+    first_clear : (N, 3) int, index in ``candidates`` of the first clear candidate with
+        ``ψ ≤ 0``, with ``ψ ≥ 0`` and with ``ψ < 0`` (−1: none).
+    best_blocked : (N, 2) int, on a side (``ψ ≤ 0``, ``ψ ≥ 0``) without a clear candidate,
+        the index of its candidate of largest ``min_ratio`` (the first among equals); −1
+        where the side has a clear candidate.
     """
 
     heading_change: np.ndarray
     conflict: np.ndarray
     candidates: np.ndarray
-    band: np.ndarray
+    band: np.ndarray | None
     min_ratio: np.ndarray
+    first_clear: np.ndarray
+    best_blocked: np.ndarray
+
+
+#: Columns of :attr:`BandResult.first_clear`.
+RIGHT_OR_AHEAD, LEFT_OR_AHEAD, STRICT_RIGHT = 0, 1, 2
 
 
 def cpa_min_ratio(own_velocity, rel_position, rel_velocity, valid, candidates, radius, lookahead_s):
@@ -161,6 +173,128 @@ def _cpa_kernel(vo, r, v, valid, psi, radius, lookahead_s):  # pragma: no cover 
                 ratio2 = max(d2, 0.0) * (1.0 / (radius[n, k] * radius[n, k]))
                 best = min(best, ratio2)
             out[n, c] = np.sqrt(best)
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def _first_clear_kernel(
+    vo, r, v, valid, psi, usable, radius, lookahead_s, threshold
+):  # pragma: no cover
+    """Per ownship, the first clear candidate of each side (columns of ``first_clear``).
+
+    ``psi`` (N, C) sorted by preference. Each candidate is tested with the same arithmetic
+    as :func:`_cpa_kernel`, intruder by intruder, stopping at the first one closer than
+    ``threshold`` (the last blocking intruder is tried first: neighbouring candidates are
+    usually blocked by the same one); the scan of an ownship stops once every side has a
+    clear candidate. So the work is about the blocked candidates before the first clear
+    ones, not C·K.
+    """
+    n_own, n_cand = psi.shape
+    n_int = valid.shape[1]
+    out = np.full((n_own, 3), -1, dtype=np.int64)
+    for n in range(n_own):
+        blocker = -1
+        for c in range(n_cand):
+            if not usable[n, c]:
+                continue
+            p = psi[n, c]
+            want = (
+                (p <= 0.0 and out[n, 0] < 0)
+                or (p >= 0.0 and out[n, 1] < 0)
+                or (p < 0.0 and out[n, 2] < 0)
+            )
+            if not want:
+                if out[n, 0] >= 0 and out[n, 1] >= 0 and out[n, 2] >= 0:
+                    break
+                continue
+            cs, sn = np.cos(p), np.sin(p)
+            rvx = cs * vo[n, 0] - sn * vo[n, 1]
+            rvy = sn * vo[n, 0] + cs * vo[n, 1]
+            clear = True
+            for j in range(-1, n_int):
+                k = blocker if j < 0 else j
+                if k < 0 or (j >= 0 and k == blocker) or not valid[n, k]:
+                    continue
+                rx, ry = r[n, k, 0], r[n, k, 1]
+                vx = (v[n, k, 0] + vo[n, 0]) - rvx
+                vy = (v[n, k, 1] + vo[n, 1]) - rvy
+                dot = vx * rx + vy * ry
+                v2 = vx * vx + vy * vy
+                t = -dot / max(v2, 1e-300)
+                t = min(max(t, 0.0), lookahead_s)
+                d2 = (t * v2 + 2.0 * dot) * t + (rx * rx + ry * ry)
+                ratio2 = max(d2, 0.0) * (1.0 / (radius[n, k] * radius[n, k]))
+                if not (np.sqrt(ratio2) >= threshold):
+                    clear = False
+                    blocker = k
+                    break
+            if clear:
+                if p <= 0.0 and out[n, 0] < 0:
+                    out[n, 0] = c
+                if p >= 0.0 and out[n, 1] < 0:
+                    out[n, 1] = c
+                if p < 0.0 and out[n, 2] < 0:
+                    out[n, 2] = c
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def _best_blocked_kernel(
+    vo, r, v, valid, psi, usable, radius, lookahead_s, rows, side
+):  # pragma: no cover
+    """For ownship ``rows[i]``, the candidate on side ``side[i]`` (0: ψ ≤ 0, 1: ψ ≥ 0) of
+    largest minimum CPA ratio (the first in order among equals): a max-min search that
+    stops evaluating a candidate once its running minimum cannot beat the best so far.
+    Same arithmetic as :func:`_cpa_kernel`, so the same choice as the full evaluation."""
+    n_int = valid.shape[1]
+    n_cand = psi.shape[1]
+    out = np.full(rows.size, -1, dtype=np.int64)
+    for i in range(rows.size):
+        n = rows[i]
+        best = -np.inf
+        blocker = -1
+        for c in range(n_cand):
+            if not usable[n, c]:
+                continue
+            p = psi[n, c]
+            if (side[i] == 0 and p > 0.0) or (side[i] == 1 and p < 0.0):
+                continue
+            cs, sn = np.cos(p), np.sin(p)
+            rvx = cs * vo[n, 0] - sn * vo[n, 1]
+            rvy = sn * vo[n, 0] + cs * vo[n, 1]
+            m = np.inf
+            arg = -1
+            for j in range(-1, n_int):
+                k = blocker if j < 0 else j
+                if k < 0 or (j >= 0 and k == blocker) or not valid[n, k]:
+                    continue
+                rx, ry = r[n, k, 0], r[n, k, 1]
+                vx = (v[n, k, 0] + vo[n, 0]) - rvx
+                vy = (v[n, k, 1] + vo[n, 1]) - rvy
+                dot = vx * rx + vy * ry
+                v2 = vx * vx + vy * vy
+                t = -dot / max(v2, 1e-300)
+                t = min(max(t, 0.0), lookahead_s)
+                d2 = (t * v2 + 2.0 * dot) * t + (rx * rx + ry * ry)
+                q = np.sqrt(max(d2, 0.0) * (1.0 / (radius[n, k] * radius[n, k])))
+                if q < m:
+                    m = q
+                    arg = k
+                if m <= best:
+                    break
+            if m > best:
+                best = m
+                out[i] = c
+                blocker = arg
+    return out
+
+
+def first_clear_from_band(candidates, band):
+    """(N, 3) :attr:`BandResult.first_clear` from a full ``band`` (N, C)."""
+    out = np.full((band.shape[0], 3), -1, dtype=np.int64)
+    for col, mask in enumerate((candidates <= 0, candidates >= 0, candidates < 0)):
+        ok = band & mask
+        out[:, col] = np.where(ok.any(axis=1), np.argmax(ok, axis=1), -1)
     return out
 
 
@@ -318,6 +452,7 @@ def band_search(
     exact_candidates=True,
     left_penalty=0.0,
     turn_rate=None,
+    full=True,
 ):
     """Choose each ownship's heading change against all its intruders at once.
 
@@ -334,6 +469,10 @@ def band_search(
     turn_rate : None, float or (N,) rad/s. ``None``: a candidate is judged as if the heading
         changed at once; else as flown: turning at ``turn_rate`` until ``ψ`` is reached,
         then straight (:func:`cpa_min_ratio_turning`).
+    full : bool. True: ``band`` and ``min_ratio`` for every candidate. False (straight
+        candidates only, ``turn_rate`` None): only what a choice needs — the first clear
+        candidate of each side, and ``min_ratio`` on the rows where a side has none — the
+        same choice, ``first_clear`` and (on those rows) ``min_ratio`` as ``full=True``.
 
     Returns
     -------
@@ -358,22 +497,66 @@ def band_search(
     order = np.lexsort((idx, cand > 0, mag), axis=-1)
     cand = np.take_along_axis(cand, order, axis=-1)
     usable = np.take_along_axis(usable, order, axis=-1)
-    if turn_rate is None:
-        ratio = cpa_min_ratio(vo, r, v, valid, np.where(usable, cand, 0.0), radius, lookahead_s)
-    else:
-        ratio = cpa_min_ratio_turning(
-            vo, r, v, valid, np.where(usable, cand, 0.0), radius, lookahead_s, turn_rate
-        )
-    ratio = np.where(usable, ratio, -np.inf)
-    band = usable & (ratio >= 1.0 - CLEAR_TOLERANCE)
     rows = np.arange(n)
-    first_clear = np.argmax(band, axis=-1)
-    best = np.argmax(ratio, axis=-1)  # first maximum: preferred among ties
-    choice = np.where(band.any(axis=-1), first_clear, best)
-    heading_change = cand[rows, choice]
+    safe = np.where(usable, cand, 0.0)
     ratio0 = cpa_min_ratio(vo, r, v, valid, np.zeros((n, 1)), radius, lookahead_s)[:, 0]
     conflict = ~(ratio0 >= 1.0 - CLEAR_TOLERANCE)
-    return BandResult(heading_change, conflict, cand, band, ratio)
+    if full or turn_rate is not None:
+        if turn_rate is None:
+            ratio = cpa_min_ratio(vo, r, v, valid, safe, radius, lookahead_s)
+        else:
+            ratio = cpa_min_ratio_turning(vo, r, v, valid, safe, radius, lookahead_s, turn_rate)
+        ratio = np.where(usable, ratio, -np.inf)
+        band = usable & (ratio >= 1.0 - CLEAR_TOLERANCE)
+        first = first_clear_from_band(cand, band)
+        best = np.full((n, 2), -1, dtype=np.int64)
+        for col, mask in enumerate((cand <= 0, cand >= 0)):
+            score = np.where(mask & usable, ratio, -np.inf)
+            blocked = (first[:, col] < 0) & (mask & usable).any(axis=1)
+            best[:, col] = np.where(blocked, np.argmax(score, axis=1), -1)
+    else:
+        band = ratio = None
+        args = (
+            np.ascontiguousarray(vo),
+            np.ascontiguousarray(r),
+            np.ascontiguousarray(v),
+            np.ascontiguousarray(valid),
+            np.ascontiguousarray(safe),
+            np.ascontiguousarray(usable),
+            np.ascontiguousarray(np.broadcast_to(radius, valid.shape)),
+            float(lookahead_s),
+        )
+        first = _first_clear_kernel(*args, 1.0 - CLEAR_TOLERANCE)
+        best = np.full((n, 2), -1, dtype=np.int64)
+        blocked = first[:, :2] < 0
+        blocked &= np.stack(
+            [(usable & (cand <= 0)).any(axis=1), (usable & (cand >= 0)).any(axis=1)], axis=1
+        )
+        who, col = np.nonzero(blocked)
+        if who.size:
+            best[who, col] = _best_blocked_kernel(*args, who.astype(np.int64), col.astype(np.int64))
+    right, left = first[:, RIGHT_OR_AHEAD], first[:, LEFT_OR_AHEAD]
+    first_any = np.where(right < 0, left, np.where(left < 0, right, np.minimum(right, left)))
+    # nothing clear: the better of the two sides' best (the earlier one among equals)
+    br, bl = best[:, 0], best[:, 1]
+    if ratio is None:
+        score = lambda idx: np.where(  # noqa: E731
+            idx >= 0,
+            cpa_min_ratio(
+                vo, r, v, valid, safe[rows, np.maximum(idx, 0)][:, None], radius, lookahead_s
+            )[:, 0],
+            -np.inf,
+        )
+    else:
+        score = lambda idx: np.where(idx >= 0, ratio[rows, np.maximum(idx, 0)], -np.inf)  # noqa: E731
+    none_clear = (right < 0) & (left < 0)
+    fallback = np.zeros(n, dtype=np.int64)
+    if none_clear.any():
+        sr, sl = score(br), score(bl)
+        fallback = np.where((sr > sl) | ((sr == sl) & (br >= 0) & ((bl < 0) | (br < bl))), br, bl)
+    choice = np.where(none_clear, np.maximum(fallback, 0), first_any)
+    heading_change = cand[rows, choice]
+    return BandResult(heading_change, conflict, cand, band, ratio, first, best)
 
 
 def resume_heading_change(

@@ -61,7 +61,13 @@ class ResolverOutput:
         rendering; ``None`` for resolvers without bands.
     probability : (N, K) conflict probability per intruder slot, or ``None``.
     min_ratio : (N, C) per candidate, minimum over intruders of CPA distance / clear radius
-        (``-inf`` for unused slots), or ``None``.
+        (``-inf`` for unused slots), or ``None``; it may be given only on the rows where a
+        side has no clear candidate (NaN elsewhere).
+    first_clear : (N, 3) int, index in ``candidates`` of the first clear candidate with
+        ``ψ ≤ 0``, ``ψ ≥ 0`` and ``ψ < 0`` (−1: none); best_blocked : (N, 2) int, on a side
+        (``ψ ≤ 0``, ``ψ ≥ 0``) with no clear candidate, its candidate of largest minimum CPA
+        ratio (−1 elsewhere). With ``candidates``, what a CDA policy needs to commit a turn
+        side (resolvers with ``reports_band``).
     """
 
     heading_change: np.ndarray
@@ -70,6 +76,8 @@ class ResolverOutput:
     band: np.ndarray | None = None
     probability: np.ndarray | None = None
     min_ratio: np.ndarray | None = None
+    first_clear: np.ndarray | None = None
+    best_blocked: np.ndarray | None = None
 
 
 def _arrays(own_velocity, rel_position, rel_velocity, valid, max_heading_change):
@@ -181,7 +189,9 @@ class BandsResolver:
     ``left_penalty`` (rad, 0: left turns rank as ``|ψ| + left_penalty``, a right-turn bias),
     ``model_turn`` (False; True: when the caller passes ``turn_rate`` to :meth:`resolve`, each
     candidate is judged as flown, turning at that rate until reached, then straight; False:
-    as if the heading changed at once).
+    as if the heading changed at once), ``full_band`` (False; True: ``band`` and
+    ``min_ratio`` of every candidate, for drawing or analysis; False: only what the choice
+    needs, the same choice, much faster).
     """
 
     prefilter = uses_turn_rate = reports_band = True
@@ -196,11 +206,13 @@ class BandsResolver:
         exact_candidates=True,
         left_penalty=0.0,
         model_turn=False,
+        full_band=False,
     ):
         self.r_safe, self.lookahead_s, self.margin = float(r_safe), float(lookahead_s), margin
         self.resolution, self.exact_candidates = float(resolution), bool(exact_candidates)
         self.left_penalty = float(left_penalty)
         self.model_turn = bool(model_turn)
+        self.full_band = bool(full_band)
 
     def _search(self, vo, r, v, valid, mx, r_safe, turn_rate=None):
         return band_search(
@@ -216,6 +228,7 @@ class BandsResolver:
             self.exact_candidates,
             self.left_penalty,
             turn_rate if self.model_turn else None,
+            full=self.full_band,
         )
 
     def resolve(
@@ -234,7 +247,13 @@ class BandsResolver:
         )
         res = self._search(vo, r, v, valid, mx, self.r_safe, turn_rate)
         return ResolverOutput(
-            res.heading_change, res.conflict, res.candidates, res.band, min_ratio=res.min_ratio
+            res.heading_change,
+            res.conflict,
+            res.candidates,
+            res.band,
+            min_ratio=res.min_ratio,
+            first_clear=res.first_clear,
+            best_blocked=res.best_blocked,
         )
 
 
@@ -299,6 +318,8 @@ class ProbabilisticBandsResolver(BandsResolver):
             res.band,
             prob,
             res.min_ratio,
+            res.first_clear,
+            res.best_blocked,
         )
 
 

@@ -193,8 +193,8 @@ class AvoidancePolicy:
                     c,
                     self.side[enc.owners],
                     np.asarray(out.candidates),
-                    np.asarray(out.band),
-                    None if out.min_ratio is None else np.asarray(out.min_ratio),
+                    np.asarray(out.first_clear),
+                    None if out.best_blocked is None else np.asarray(out.best_blocked),
                 )
             advice[enc.owners] = np.clip(psi, -mx, mx)
             conflict[enc.owners] = c
@@ -221,50 +221,49 @@ class AvoidancePolicy:
         enc = enc.subset(~(ratio0 >= 1.0 - CLEAR_TOLERANCE))
         return enc.compact(reachable(enc, velocities[enc.owners], clear_radius, self.lookahead_s))
 
-    def _commit(self, psi, conflict, side, cand, band, min_ratio=None):
+    def _commit(self, psi, conflict, side, cand, first_clear, best_blocked=None):
         """Heading changes and sides under the turn preference.
 
         ``psi`` (n,) resolver choices, rad; ``conflict`` (n,) bool; ``side`` (n,) committed
-        sides; ``cand`` (n, C) candidate heading changes sorted by the resolver's preference,
-        ``band`` (n, C) clear flags; ``min_ratio`` (n, C) or None. ``"right"`` takes the
-        nearest clear heading on the right if there is one within the search range (else on
-        the left), ``"nearest"`` the resolver's choice; afterwards the committed side is
-        kept while it has a clear heading. When it has none, a resolver that reports
-        ``min_ratio`` gets the best heading on that side and the side is kept; otherwise
-        the resolver's choice is used and the side follows it. Under ``"right"`` a left
-        commitment is only the fallback: back to the right as soon as a strictly right
-        heading is clear. Returns ``(psi (n,), side (n,))``.
+        sides; ``cand`` (n, C) candidate heading changes sorted by the resolver's preference;
+        ``first_clear`` (n, 3) index of the first clear candidate with ψ ≤ 0, ψ ≥ 0, ψ < 0
+        (−1: none); ``best_blocked`` (n, 2) or None: on a side (ψ ≤ 0, ψ ≥ 0) without a
+        clear candidate, the index of its best one (largest minimum CPA ratio). ``"right"``
+        takes the nearest clear
+        heading on the right if there is one within the search range (else on the left),
+        ``"nearest"`` the resolver's choice; afterwards the committed side is kept while it
+        has a clear heading. When it has none, a resolver that reports ``min_ratio`` gets
+        the best heading on that side and the side is kept; otherwise the resolver's choice
+        is used and the side follows it. Under ``"right"`` a left commitment is only the
+        fallback: back to the right as soon as a strictly right heading is clear. Returns
+        ``(psi (n,), side (n,))``.
         """
         rows = np.arange(psi.size)
-
-        def first_clear(mask):
-            ok = band & mask
-            return ok.any(axis=1), cand[rows, np.argmax(ok, axis=1)]
+        right, left, strict_right = first_clear[:, 0], first_clear[:, 1], first_clear[:, 2]
+        has_r, pick_r = right >= 0, cand[rows, np.maximum(right, 0)]
+        has_l, pick_l = left >= 0, cand[rows, np.maximum(left, 0)]
 
         new_side = side.copy()
         fresh = conflict & (side == 0)
         if self.preference == "right":
-            has_r, pick_r = first_clear(cand <= 0)
-            has_l, pick_l = first_clear(cand >= 0)
             psi = np.where(fresh & has_r, pick_r, np.where(fresh & ~has_r & has_l, pick_l, psi))
             new_side = np.where(
                 fresh, np.where(has_r, -1.0, np.where(has_l, 1.0, np.sign(psi))), new_side
             )
             # one ownship turning left and one right can turn into each other
-            back = conflict & (side > 0) & first_clear(cand < 0)[0]
+            back = conflict & (side > 0) & (strict_right >= 0)
             side = np.where(back, -1.0, side)
             new_side = np.where(back, -1.0, new_side)
         else:
             new_side = np.where(fresh, np.sign(psi), new_side)
         kept = conflict & (side != 0)
-        on_side = cand * side[:, None] >= 0
-        has_s, pick_s = first_clear(on_side)
+        has_s = np.where(side < 0, has_r, has_l)
+        pick_s = np.where(side < 0, pick_r, pick_l)
         psi = np.where(kept & has_s, pick_s, psi)
-        if min_ratio is not None:
+        if best_blocked is not None:
             # two ownships flipping sides at once can turn into each other: keep the side
-            score = np.where(on_side & ~np.isnan(cand), min_ratio, -np.inf)
-            best = cand[rows, np.argmax(score, axis=1)]
-            psi = np.where(kept & ~has_s, best, psi)
+            best = np.where(side < 0, best_blocked[:, 0], best_blocked[:, 1])
+            psi = np.where(kept & ~has_s & (best >= 0), cand[rows, np.maximum(best, 0)], psi)
         else:
             new_side = np.where(kept & ~has_s, np.sign(psi), new_side)
         return psi, np.where(conflict, new_side, side)
