@@ -146,7 +146,7 @@ def test_gif_needs_render(tmp_path):
 def test_mp4_without_ffmpeg_is_one_line(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     proc = main_in_process(capsys, "run", "head_on", "--steps", "1", "--render", "out", "--mp4")
-    assert_one_line_error(proc, "--mp4 needs", "imageio-ffmpeg")
+    assert_one_line_error(proc, "--render out", "mp4 video needs", "imageio-ffmpeg")
 
 
 def test_list(tmp_path):

@@ -41,6 +41,7 @@ import numpy as np
 from airspace_sim import registry
 from airspace_sim.dynamics import presets
 from airspace_sim.errors import UserError
+from airspace_sim.world import snapshot as snapshots
 from airspace_sim.world import streams
 from airspace_sim.world.autopilots import AutopilotContext, FlightState, wrap
 from airspace_sim.world.bodies import LOS, NMAC, RANGE, Airspace
@@ -48,23 +49,9 @@ from airspace_sim.world.control import Avoidance, Encounters, gather
 from airspace_sim.world.metrics import Metrics
 from airspace_sim.world.trackers import TrackTable
 
-#: Number of predicted points per track in :meth:`World.snapshot`.
-PREDICTION_POINTS = 6
 #: rad: an autopilot turn smaller than this per step is "on course" (a route autopilot's
 #: atan2 gives ~1e-16 rad/s on a straight leg, which must not count as turning back)
 TURN_TOLERANCE = 1e-9
-
-
-def _predict(x: np.ndarray, horizon: float, n_points: int) -> np.ndarray:
-    """Coordinated-turn extrapolation of (P, 5) states at ``horizon·k/n_points`` s, (P, S, 2)."""
-    t = horizon * np.arange(1, n_points + 1) / n_points
-    w = x[:, 4:5]
-    wt = w * t
-    s = t * np.sinc(wt / np.pi)  # sin(ωt)/ω, exact at ω = 0
-    c = t * np.sin(wt / 2.0) * np.sinc(wt / (2.0 * np.pi))  # (1 − cos ωt)/ω
-    px = x[:, 0:1] + x[:, 1:2] * s - x[:, 3:4] * c
-    py = x[:, 2:3] + x[:, 3:4] * s + x[:, 1:2] * c
-    return np.stack([px, py], axis=-1)
 
 
 class World:
@@ -440,93 +427,6 @@ class World:
             self.step_count, self.time, self.flown, self.progress(), self._has_plan
         )
 
-    def snapshot(self, prediction_points: int = PREDICTION_POINTS) -> dict:
-        """Everything a renderer or an observer needs, as copies (N aircraft, P tracks,
-        M tracker modes, S = ``prediction_points``). Units SI, angles rad CCW from east.
-
-        =====================  ============  ================================================
-        key                    shape         meaning
-        =====================  ============  ================================================
-        ``time``               float         simulated time, s
-        ``step``               int           steps taken
-        ``dt``                 float         world step, s
-        ``ids``                (N,) str      aircraft ids
-        ``positions``          (N, 2)        true positions, m
-        ``velocities``         (N, 2)        true velocities, m/s (0 for inactive aircraft)
-        ``headings``           (N,)          true headings, rad
-        ``speeds``             (N,)          ground speeds, m/s
-        ``turn_rates``         (N,)          turn rate flown in the last step, rad/s
-        ``max_turn_rate``      (N,)          turn-rate limits, rad/s
-        ``active``             (N,) bool     still flying
-        ``controlled``         (N,) bool     RL agents
-        ``avoid``              (N,) bool     runs the resolver
-        ``modes``              (N,) int      true Markov mode over the last step, −1 if none
-        ``in_los``             (N,) bool     within r_safe of another aircraft
-        ``nmac``               (N,) bool     within the NMAC distance of another aircraft
-        ``conflict``           (N,) bool     resolver predicts a conflict at current heading
-        ``advice``             (N,)          resolver heading change for the next step, rad
-        ``r_safe``             float         protected-zone radius, m (pymunk circles r/2)
-        ``nmac_distance``      float         NMAC distance, m
-        ``sensor_range``       float         surveillance range, m
-        ``lookahead``          float         resolver look-ahead, s
-        ``mode_names``         (M,) str      tracker mode names (straight, left, right)
-        ``tracks``             dict          ``owner`` (P,) int, ``intruder`` (P,) int,
-                                             ``x`` (P, 5) ``[x, vx, y, vy, Ω]`` (m, m/s,
-                                             rad/s), ``P`` (P, 5, 5), ``mu`` (P, M),
-                                             ``misses`` (P,) int, ``age`` (P,) steps
-        ``track_owner`` etc.   as above      the same arrays, flat (``track_owner``,
-                                             ``track_intruder``, ``track_x``, ``track_P``,
-                                             ``track_mu``)
-        ``predicted``          (P, S, 2)     track positions extrapolated (estimated turn
-                                             rate Ω) at lookahead·k/S s, k = 1..S, m
-        ``los_pairs``          (L, 2) int    aircraft index pairs (i < j) in LoS
-        ``nmac_pairs``         (Q, 2) int    aircraft index pairs (i < j) in NMAC
-        =====================  ============  ================================================
-        """
-        t = self.tracks
-        x = np.array(t.x)
-        tracks = {
-            "owner": t.owner.copy(),
-            "intruder": t.intruder.copy(),
-            "x": x,
-            "P": np.array(t.P),
-            "mu": np.array(t.mu),
-            "misses": t.misses.copy(),
-            "age": t.age.copy(),
-        }
-        los_i, los_j = self.airspace.pair_arrays(LOS)
-        nm_i, nm_j = self.airspace.pair_arrays(NMAC)
-        snap = {
-            "time": float(self.time),
-            "step": int(self.step_count),
-            "dt": self.dt,
-            "ids": np.array(self.ids, dtype=str),
-            "positions": self.positions.copy(),
-            "velocities": self.velocities.copy(),
-            "headings": self.headings.copy(),
-            "speeds": self.speeds.copy(),
-            "turn_rates": self.turn_rates.copy(),
-            "max_turn_rate": self.max_turn_rate.copy(),
-            "active": self.active.copy(),
-            "controlled": self.controlled.copy(),
-            "avoid": self.avoid.copy(),
-            "modes": self.modes.copy(),
-            "in_los": self.in_los.copy(),
-            "nmac": self.nmac.copy(),
-            "conflict": self.conflict.copy(),
-            "advice": self.advice.copy(),
-            "r_safe": self.r_safe,
-            "nmac_distance": self.nmac_distance,
-            "sensor_range": self.sensor_range,
-            "lookahead": float(self.avoidance.lookahead),
-            "mode_names": np.array(t.mode_names, dtype=str),
-            "tracks": tracks,
-            "predicted": _predict(x, self.avoidance.lookahead, prediction_points)
-            if len(x)
-            else np.zeros((0, prediction_points, 2)),
-            "los_pairs": np.stack([los_i, los_j], axis=1),
-            "nmac_pairs": np.stack([nm_i, nm_j], axis=1),
-        }
-        for k in ("owner", "intruder", "x", "P", "mu"):
-            snap[f"track_{k}"] = tracks[k]
-        return snap
+    def snapshot(self, prediction_points: int = snapshots.PREDICTION_POINTS):
+        """The world now, as a read-only :class:`~airspace_sim.world.snapshot.Snapshot`."""
+        return snapshots.snapshot(self, prediction_points)
