@@ -149,6 +149,44 @@ def test_mp4_without_ffmpeg_is_one_line(tmp_path, monkeypatch, capsys):
     assert_one_line_error(proc, "--render out", "mp4 video needs", "imageio-ffmpeg")
 
 
+@pytest.mark.parametrize(
+    "args,needle",
+    [
+        (["--steps", "0"], "--steps: expected a positive integer, got 0"),
+        (["--steps", "2.5"], "--steps: expected a positive integer, got '2.5'"),
+        (["--seed", "-1"], "--seed: expected a non-negative integer, got -1"),
+        (["--every", "x"], "--every: expected a positive integer, got 'x'"),
+        (["--fps", "0"], "--fps: expected a positive number, got '0'"),
+        (["--fps", "nan"], "--fps: expected a positive number, got 'nan'"),
+        (["--size", "10x10"], "--size: expected at least 64x64 pixels, got '10x10'"),
+        (["--size", "wide"], "--size: expected WIDTHxHEIGHT in pixels, e.g. 800x800, got 'wide'"),
+    ],
+)
+def test_bad_option_values_name_the_option(capsys, args, needle):
+    from airspace_sim.cli import build_parser
+
+    with pytest.raises(SystemExit) as exc:
+        build_parser().parse_args(["run", "head_on", *args])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1] == f"airspace-sim run: error: argument {needle}", err
+    assert "Traceback" not in "\n".join(err)
+
+
+def test_option_types_accept_good_values():
+    from airspace_sim.commands import _args
+
+    assert _args.positive_int("3") == 3 and _args.non_negative_int("0") == 0
+    assert _args.positive_float("2.5") == 2.5 and _args.frame_size("320X200") == (320, 200)
+
+
+def test_render_into_a_file_is_one_line(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "taken").write_text("x")
+    proc = main_in_process(capsys, "run", "head_on", "--steps", "1", "--render", "taken/out")
+    assert_one_line_error(proc, "--render taken/out", "cannot create folder")
+
+
 def test_list(tmp_path):
     proc = cli("run", "--list", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr

@@ -291,9 +291,12 @@ def test_route_progress_is_the_route_autopilots():
     assert np.hypot(*to_wp) <= w.speeds[i] * w.dt or to_wp @ leg < 0
 
 
-def test_agent_without_a_route_has_no_waypoint_terms():
-    env = par(overrides=["aircraft[0].autopilot=\"straight\"", "aircraft[0].waypoints=[]"],
-              max_cycles=5)  # fmt: skip
+@pytest.mark.parametrize("autopilot", ["straight", "route"])  # route with no waypoints
+def test_agent_without_a_route_has_no_waypoint_terms(autopilot):
+    env = par(
+        overrides=[f'aircraft[0].autopilot="{autopilot}"', "aircraft[0].waypoints=[]"],
+        max_cycles=5,
+    )
     obs, _ = env.reset(seed=0)
     names = env.observation_layout.names()
     for _ in range(3):
