@@ -236,19 +236,19 @@ def test_track_owners_default_and_choice():
     from airspace_sim.errors import UserError
 
     ids = ["markov1", "markov2", "ownship", "ring00"]
-    world = SimpleNamespace(
+    snap = SimpleNamespace(  # the fields of a Snapshot it reads
         ids=ids, controlled=np.zeros(4, bool), avoid=np.array([False, False, True, True])
     )
-    assert run_cmd.track_owners(world, None) == ["ownship"]  # first aircraft that tracks
-    assert run_cmd.track_owners(world, "all") == "all"
-    assert run_cmd.track_owners(world, "ring00, markov1") == ["ring00", "markov1"]
+    assert run_cmd.track_owners(snap, None) == ["ownship"]  # first aircraft that tracks
+    assert run_cmd.track_owners(snap, "all") == "all"
+    assert run_cmd.track_owners(snap, "ring00, markov1") == ["ring00", "markov1"]
     with pytest.raises(UserError, match="--owners: no aircraft 'nope'"):
-        run_cmd.track_owners(world, "ring00,nope")
-    world.controlled[3] = True
-    assert run_cmd.track_owners(world, None) is None  # the renderer's default: the agents
-    world.controlled[3] = False
-    world.avoid[:] = False
-    assert run_cmd.track_owners(world, None) is None
+        run_cmd.track_owners(snap, "ring00,nope")
+    snap.controlled[3] = True
+    assert run_cmd.track_owners(snap, None) is None  # the renderer's default: the agents
+    snap.controlled[3] = False
+    snap.avoid[:] = False
+    assert run_cmd.track_owners(snap, None) is None
 
 
 # --------------------------------------------------------------------------- real runs

@@ -192,26 +192,27 @@ def _write_json(path: Path, summary: dict) -> None:
         raise UserError(f"cannot write {path}: {exc}") from None
 
 
-def track_owners(world, text: str | None):
-    """The renderer's ``owners``: ``--owners`` ids or "all"; by default the RL agents, else
-    the first aircraft that tracks (avoids), else aircraft 0."""
+def track_owners(snap, text: str | None):
+    """The renderer's ``owners`` for the run's first :class:`Snapshot` ``snap``: ``--owners``
+    ids or "all"; by default the RL agents, else the first aircraft that tracks (avoids),
+    else aircraft 0."""
     if text:
         if text.strip() == "all":
             return "all"
         ids = [t.strip() for t in text.split(",") if t.strip()]
-        unknown = [i for i in ids if i not in world.ids]
+        unknown = [i for i in ids if i not in snap.ids]
         if unknown or not ids:
-            known = ", ".join(world.ids[:12]) + (", ..." if len(world.ids) > 12 else "")
+            known = ", ".join(snap.ids[:12]) + (", ..." if len(snap.ids) > 12 else "")
             bad = unknown[0] if unknown else text
             raise UserError(f"--owners: no aircraft {bad!r} (ids: {known})")
         return ids
     import numpy as np
 
-    controlled = np.flatnonzero(world.controlled)
+    controlled = np.flatnonzero(snap.controlled)
     if controlled.size:
         return None  # the renderer's own default: the RL agents
-    tracking = np.flatnonzero(np.asarray(world.avoid, dtype=bool))
-    return [world.ids[int(tracking[0])]] if tracking.size else None
+    tracking = np.flatnonzero(snap.avoid)
+    return [snap.ids[int(tracking[0])]] if tracking.size else None
 
 
 class Frames:
@@ -417,14 +418,15 @@ def run(args) -> int:
 
     frames = None
     if args.render:
+        first = world.snapshot()
         frames = Frames(
             Path(args.render),
             args.size,
             "gif" if args.gif else "mp4" if args.mp4 else None,
             args.fps,
-            track_owners(world, args.owners),
+            track_owners(first, args.owners),
         )
-        frames.add(world.snapshot())
+        frames.add(first)
 
     from tqdm import tqdm
 

@@ -277,8 +277,9 @@ class AirspaceParallelEnv(ParallelEnv):
         w.step(rates)
         self.num_cycles += 1
 
-        prev_index, _, _, _, prev_dist = self._route
-        self._route = index, done, cross, _, dist = self._route_progress()
+        prev_index, prev_dist = self._route[0], self._route[4]
+        self._route = self._route_progress()
+        index, done, cross, _, dist = self._route
         acting = list(self.agents)
         rewards, terms, truncs, infos = {}, {}, {}, {}
         for a in acting:
@@ -324,8 +325,8 @@ class AirspaceParallelEnv(ParallelEnv):
         pos, vel = w.positions[idx], w.velocities[idx]
         heading, speed, advice = w.headings[idx], w.speeds[idx], w.advice[idx]
         max_rate = np.array([self._max_rate[a] for a in agents])
-        k = np.array([self._slot[a] for a in agents], dtype=np.int64)
-        _, _, cross, bearing, dist = (g[k] for g in self._route)
+        slot = np.array([self._slot[a] for a in agents], dtype=np.int64)
+        _, _, cross, bearing, dist = (g[slot] for g in self._route)
         has_wp = np.isfinite(dist)
         rel_b = bearing - heading
         dist = np.where(has_wp, dist, 0.0)
