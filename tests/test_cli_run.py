@@ -146,7 +146,45 @@ def test_gif_needs_render(tmp_path):
 def test_mp4_without_ffmpeg_is_one_line(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     proc = main_in_process(capsys, "run", "head_on", "--steps", "1", "--render", "out", "--mp4")
-    assert_one_line_error(proc, "--mp4 needs", "imageio-ffmpeg")
+    assert_one_line_error(proc, "--render out", "mp4 video needs", "imageio-ffmpeg")
+
+
+@pytest.mark.parametrize(
+    "args,needle",
+    [
+        (["--steps", "0"], "--steps: expected a positive integer, got 0"),
+        (["--steps", "2.5"], "--steps: expected a positive integer, got '2.5'"),
+        (["--seed", "-1"], "--seed: expected a non-negative integer, got -1"),
+        (["--every", "x"], "--every: expected a positive integer, got 'x'"),
+        (["--fps", "0"], "--fps: expected a positive number, got '0'"),
+        (["--fps", "nan"], "--fps: expected a positive number, got 'nan'"),
+        (["--size", "10x10"], "--size: expected at least 64x64 pixels, got '10x10'"),
+        (["--size", "wide"], "--size: expected WIDTHxHEIGHT in pixels, e.g. 800x800, got 'wide'"),
+    ],
+)
+def test_bad_option_values_name_the_option(capsys, args, needle):
+    from airspace_sim.cli import build_parser
+
+    with pytest.raises(SystemExit) as exc:
+        build_parser().parse_args(["run", "head_on", *args])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1] == f"airspace-sim run: error: argument {needle}", err
+    assert "Traceback" not in "\n".join(err)
+
+
+def test_option_types_accept_good_values():
+    from airspace_sim.commands import _args
+
+    assert _args.positive_int("3") == 3 and _args.non_negative_int("0") == 0
+    assert _args.positive_float("2.5") == 2.5 and _args.frame_size("320X200") == (320, 200)
+
+
+def test_render_into_a_file_is_one_line(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "taken").write_text("x")
+    proc = main_in_process(capsys, "run", "head_on", "--steps", "1", "--render", "taken/out")
+    assert_one_line_error(proc, "--render taken/out", "cannot create folder")
 
 
 def test_list(tmp_path):
@@ -198,19 +236,19 @@ def test_track_owners_default_and_choice():
     from airspace_sim.errors import UserError
 
     ids = ["markov1", "markov2", "ownship", "ring00"]
-    world = SimpleNamespace(
+    snap = SimpleNamespace(  # the fields of a Snapshot it reads
         ids=ids, controlled=np.zeros(4, bool), avoid=np.array([False, False, True, True])
     )
-    assert run_cmd.track_owners(world, None) == ["ownship"]  # first aircraft that tracks
-    assert run_cmd.track_owners(world, "all") == "all"
-    assert run_cmd.track_owners(world, "ring00, markov1") == ["ring00", "markov1"]
+    assert run_cmd.track_owners(snap, None) == ["ownship"]  # first aircraft that tracks
+    assert run_cmd.track_owners(snap, "all") == "all"
+    assert run_cmd.track_owners(snap, "ring00, markov1") == ["ring00", "markov1"]
     with pytest.raises(UserError, match="--owners: no aircraft 'nope'"):
-        run_cmd.track_owners(world, "ring00,nope")
-    world.controlled[3] = True
-    assert run_cmd.track_owners(world, None) is None  # the renderer's default: the agents
-    world.controlled[3] = False
-    world.avoid[:] = False
-    assert run_cmd.track_owners(world, None) is None
+        run_cmd.track_owners(snap, "ring00,nope")
+    snap.controlled[3] = True
+    assert run_cmd.track_owners(snap, None) is None  # the renderer's default: the agents
+    snap.controlled[3] = False
+    snap.avoid[:] = False
+    assert run_cmd.track_owners(snap, None) is None
 
 
 # --------------------------------------------------------------------------- real runs

@@ -234,6 +234,83 @@ def test_arrival_terminates_with_bonus_and_weights_apply():
     assert "east" in env.agents  # the other agent goes on
 
 
+ROUTE = [
+    "resolver.kind=none",
+    "aircraft[0].waypoints=[[-10000.0, 2000.0], [-2000.0, -3000.0], [5000.0, 0.0]]",
+]
+
+
+def route_oracle(p, start, wps, k):
+    """Cross-track (+ left), bearing and distance of position ``p`` on leg ``k`` of the route
+    ``start -> wps[0] -> ...``, from the waypoints as written in the scenario."""
+    a = np.asarray(start if k == 0 else wps[k - 1], float)
+    b = np.asarray(wps[k], float)
+    leg, rel, d = b - a, np.asarray(p) - a, b - np.asarray(p)
+    cross = (leg[0] * rel[1] - leg[1] * rel[0]) / np.hypot(*leg)
+    return cross, np.arctan2(d[1], d[0]), np.hypot(*d)
+
+
+def test_route_progress_is_the_route_autopilots():
+    # the agent sends no action: the world's route autopilot flies it through 3 waypoints;
+    # the observation's route entries and the waypoint index follow that autopilot
+    env = par(overrides=ROUTE, max_cycles=400)
+    obs, infos = env.reset(seed=0)
+    w = env.world
+    i = w.index("west")
+    wps = w.scenario.aircraft[0].waypoints
+    start = w.positions[i].copy()
+    lay = env.observation_layout
+    names = lay.names()
+    col = {n: names.index(f"own.{n}") for n in ("cross_track", "sin_bearing_to_waypoint",
+                                                "cos_bearing_to_waypoint", "distance_to_waypoint",
+                                                "has_waypoint")}  # fmt: skip
+    seen, prev_k = set(), 0
+    while "west" in env.agents:
+        o, k = obs["west"], infos["west"]["waypoint_index"]
+        assert k in (prev_k, prev_k + 1)
+        if k == prev_k + 1:  # switched: the last step ended within one step's travel or abeam
+            to_wp = np.asarray(wps[prev_k]) - w.positions[i]
+            leg = np.asarray(wps[prev_k]) - np.asarray(start if prev_k == 0 else wps[prev_k - 1])
+            assert np.hypot(*to_wp) <= w.speeds[i] * w.dt or to_wp @ leg < 0
+        seen.add(k)
+        cross, bearing, dist = route_oracle(w.positions[i], start, wps, k)
+        rel = bearing - w.headings[i]
+        np.testing.assert_allclose(o[col["cross_track"]], np.clip(cross / (10 * 3000.0), -1, 1),
+                                   atol=1e-6)  # fmt: skip
+        np.testing.assert_allclose(o[col["sin_bearing_to_waypoint"]], np.sin(rel), atol=1e-6)
+        np.testing.assert_allclose(o[col["cos_bearing_to_waypoint"]], np.cos(rel), atol=1e-6)
+        np.testing.assert_allclose(o[col["distance_to_waypoint"]], dist / 80000.0, atol=1e-6)
+        assert o[col["has_waypoint"]] == 1.0
+        prev_k = k
+        obs, rew, term, trunc, infos = env.step({})
+    # arrival is the step the world's autopilot finishes and the aircraft leaves the world
+    assert term["west"] and infos["west"]["arrived"] and not w.active[i]
+    assert infos["west"]["waypoint_index"] == 3 and seen == {0, 1, 2}
+    assert obs["west"][col["has_waypoint"]] == 0.0
+    to_wp, leg = np.asarray(wps[-1]) - w.positions[i], np.subtract(wps[-1], wps[-2])
+    assert np.hypot(*to_wp) <= w.speeds[i] * w.dt or to_wp @ leg < 0
+
+
+@pytest.mark.parametrize("autopilot", ["straight", "route"])  # route with no waypoints
+def test_agent_without_a_route_has_no_waypoint_terms(autopilot):
+    env = par(
+        overrides=[f'aircraft[0].autopilot="{autopilot}"', "aircraft[0].waypoints=[]"],
+        max_cycles=5,
+    )
+    obs, _ = env.reset(seed=0)
+    names = env.observation_layout.names()
+    for _ in range(3):
+        obs, rew, term, trunc, infos = env.step(
+            {a: np.full(1, 0.01, np.float32) for a in env.agents}
+        )
+        o = obs["west"]
+        assert o[names.index("own.has_waypoint")] == 0.0
+        assert o[names.index("own.cross_track")] == 0.0
+        assert infos["west"]["reward_terms"]["deviation"] == 0.0
+        assert infos["west"]["reward_terms"]["progress"] == 0.0
+        assert infos["west"]["waypoint_index"] == 0
+
+
 def test_truncation_at_max_cycles():
     env = par(max_cycles=7)
     env.reset(seed=0)

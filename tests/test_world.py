@@ -1,4 +1,4 @@
-"""The World: autopilots, turn limits, tracks, avoidance, determinism, isolation, snapshot."""
+"""The World: autopilots, turn limits, tracks, avoidance, determinism, isolation."""
 
 import math
 
@@ -15,7 +15,6 @@ from airspace_sim.scenarios.schema import (
     TrackerSpec,
 )
 from airspace_sim.world import World
-from airspace_sim.world.benchmark import random_scenario
 
 
 def scenario(aircraft, resolver="none", tracker="imm", duration=300.0, seed=0, **sensor):
@@ -321,38 +320,6 @@ def test_generated_traffic_uses_build_aircraft():
     assert world.n == 8 and world.step_count == 0
     world.run(3)
     assert world.time == 3.0
-
-
-def test_snapshot_keys_and_shapes():
-    world = World(random_scenario(12, seed=1))
-    world.run(10)
-    s = world.snapshot()
-    n, p = world.n, len(world.tracks)
-    assert p > 0
-    for key, shape in {
-        "positions": (n, 2),
-        "velocities": (n, 2),
-        "headings": (n,),
-        "in_los": (n,),
-        "nmac": (n,),
-        "conflict": (n,),
-        "controlled": (n,),
-        "active": (n,),
-        "advice": (n,),
-        "ids": (n,),
-    }.items():
-        assert s[key].shape == shape, key
-    tr = s["tracks"]
-    assert tr["x"].shape == (p, 5) and tr["P"].shape == (p, 5, 5) and tr["mu"].shape == (p, 3)
-    assert s["predicted"].shape == (p, 6, 2)
-    # the last predicted point is the track extrapolated over the look-ahead
-    x = tr["x"]
-    straight = np.abs(x[:, 4]) < 1e-9
-    far = x[straight][:, (0, 2)] + 120.0 * x[straight][:, (1, 3)]
-    np.testing.assert_allclose(s["predicted"][straight, -1], far, atol=1e-6)
-    assert isinstance(s["time"], float) and s["r_safe"] == 3000.0
-    s["positions"][:] = 0  # a copy
-    assert np.any(world.positions != 0)
 
 
 def test_every_registered_resolver_and_tracker_runs_in_a_world():

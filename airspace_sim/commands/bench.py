@@ -2,14 +2,18 @@
 
 from __future__ import annotations
 
+from airspace_sim.commands._args import positive_int
+
 HELP = "Benchmark the batched IMM against filterpy's IMMEstimator (tracker-updates per second)."
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("--steps", type=int, default=20, help="IMM steps per timing (default 20)")
+    parser.add_argument(
+        "--steps", type=positive_int, default=20, help="IMM steps per timing (default 20)"
+    )
     parser.add_argument(
         "--repeats",
-        type=int,
+        type=positive_int,
         default=5,
         help="timings per batch size; the median is reported (default 5)",
     )
@@ -17,7 +21,7 @@ def add_arguments(parser) -> None:
         "--sizes", default="1,100,10000", help="comma-separated batch sizes B (default 1,100,10000)"
     )
     parser.add_argument(
-        "--filterpy-updates", type=int, default=1000,
+        "--filterpy-updates", type=positive_int, default=1000,
         help="single-tracker filterpy updates to time, split over the repeats (default 1000)",
     )  # fmt: skip
     parser.add_argument("--preset", default="seed", help="model preset (default seed)")

@@ -28,41 +28,10 @@ import sys
 import time
 from pathlib import Path
 
+from airspace_sim.commands._args import frame_size, non_negative_int, positive_float, positive_int
 from airspace_sim.errors import UserError
 
 HELP = "run a scenario: step the world, print metrics, optionally render frames"
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
-    return value
-
-
-def _non_negative_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a non-negative integer, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"expected a non-negative integer, got {value}")
-    return value
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected WIDTHxHEIGHT in pixels, e.g. 800x800, got {text!r}"
-        ) from None
-    if w < 64 or h < 64:
-        raise argparse.ArgumentTypeError(f"expected at least 64x64 pixels, got {text!r}")
-    return w, h
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -72,11 +41,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--list", action="store_true", help="list the shipped scenarios and exit")
     parser.add_argument(
         "--steps",
-        type=_positive_int,
+        type=positive_int,
         help="world steps to run (default: the scenario's duration / dt)",
     )
     parser.add_argument(
-        "--seed", type=_non_negative_int, help="random seed (default: the scenario's seed)"
+        "--seed", type=non_negative_int, help="random seed (default: the scenario's seed)"
     )
     parser.add_argument(
         "--set",
@@ -101,20 +70,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--every",
-        type=_positive_int,
+        type=positive_int,
         default=1,
         metavar="N",
         help="render every N-th step (default 1)",
     )
     parser.add_argument(
         "--size",
-        type=_size,
+        type=frame_size,
         default=(800, 800),
         metavar="WxH",
         help="frame size in pixels (default 800x800)",
     )
     parser.add_argument(
-        "--fps", type=float, default=10.0, help="frames per second of the GIF/MP4 (default 10)"
+        "--fps",
+        type=positive_float,
+        default=10.0,
+        help="frames per second of the GIF/MP4 (default 10)",
     )
     parser.add_argument(
         "--owners",
@@ -130,7 +102,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--checkpoint-every",
-        type=_positive_int,
+        type=positive_int,
         metavar="N",
         help="also save the checkpoint every N steps (survives a killed run)",
     )
@@ -220,98 +192,51 @@ def _write_json(path: Path, summary: dict) -> None:
         raise UserError(f"cannot write {path}: {exc}") from None
 
 
-def track_owners(world, text: str | None):
-    """The renderer's ``owners``: ``--owners`` ids or "all"; by default the RL agents, else
-    the first aircraft that tracks (avoids), else aircraft 0."""
+def track_owners(snap, text: str | None):
+    """The renderer's ``owners`` for the run's first :class:`Snapshot` ``snap``: ``--owners``
+    ids or "all"; by default the RL agents, else the first aircraft that tracks (avoids),
+    else aircraft 0."""
     if text:
         if text.strip() == "all":
             return "all"
         ids = [t.strip() for t in text.split(",") if t.strip()]
-        unknown = [i for i in ids if i not in world.ids]
+        unknown = [i for i in ids if i not in snap.ids]
         if unknown or not ids:
-            known = ", ".join(world.ids[:12]) + (", ..." if len(world.ids) > 12 else "")
+            known = ", ".join(snap.ids[:12]) + (", ..." if len(snap.ids) > 12 else "")
             bad = unknown[0] if unknown else text
             raise UserError(f"--owners: no aircraft {bad!r} (ids: {known})")
         return ids
     import numpy as np
 
-    controlled = np.flatnonzero(world.controlled)
+    controlled = np.flatnonzero(snap.controlled)
     if controlled.size:
         return None  # the renderer's own default: the RL agents
-    tracking = np.flatnonzero(np.asarray(world.avoid, dtype=bool))
-    return [world.ids[int(tracking[0])]] if tracking.size else None
+    tracking = np.flatnonzero(snap.avoid)
+    return [snap.ids[int(tracking[0])]] if tracking.size else None
 
 
-class _Frames:
-    """Numbered PNG frames in a folder, plus an optional GIF or MP4 assembled from them."""
+class Frames:
+    """The ``--render`` output: each added snapshot drawn by one :class:`Renderer` and written
+    by one :class:`~airspace_sim.rendering.FrameWriter` (PNGs, optional GIF/MP4)."""
 
     def __init__(self, directory: Path, size, video: str | None, fps: float, owners=None):
-        from airspace_sim.rendering import Renderer
+        from airspace_sim.rendering import FrameWriter, Renderer
 
-        self.directory = directory
         try:
-            directory.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise UserError(f"--render {directory}: cannot create folder: {exc}") from None
-        for old in directory.glob("frame_*.png"):  # a shorter rerun must not leave stale frames
-            old.unlink()
+            self.writer = FrameWriter(directory, video=video, fps=fps)
+        except UserError as exc:
+            raise UserError(f"--render {directory}: {exc}") from None
         self.renderer = Renderer(*size, owners=owners)
-        self.video = video
-        self.fps = fps
-        self.paths: list[Path] = []
-        self._mp4 = None
-        if video == "mp4":
-            import warnings
+        self.directory = self.writer.directory
+        self.paths = self.writer.paths
 
-            try:
-                import imageio.v2 as iio2
-
-                with warnings.catch_warnings():  # imageio's legacy plugin list warns on import
-                    warnings.simplefilter("ignore", DeprecationWarning)
-                    self._mp4 = iio2.get_writer(directory / "run.mp4", fps=fps, macro_block_size=1)
-            except (ImportError, ValueError, RuntimeError) as exc:
-                first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
-                raise UserError(
-                    "--mp4 needs the ffmpeg plugin of imageio "
-                    f"(pip install imageio-ffmpeg): {first}"
-                ) from None
-
-    def add(self, snapshot: dict) -> None:
-        import imageio.v3 as iio
-
-        frame = self.renderer.render(snapshot)
-        path = self.directory / f"frame_{len(self.paths):05d}.png"
-        iio.imwrite(path, frame, compress_level=1)  # fast: ~2x quicker than the default 6
-        self.paths.append(path)
-        if self._mp4 is not None:
-            self._mp4.append_data(frame)
+    def add(self, snapshot) -> None:
+        """Draw and write one :class:`~airspace_sim.world.snapshot.Snapshot`."""
+        self.writer.add(self.renderer.render(snapshot))
 
     def close(self) -> Path | None:
-        if self._mp4 is not None:
-            self._mp4.close()
-            return self.directory / "run.mp4"
-        if self.video == "gif" and self.paths:
-            from PIL import Image
-
-            def paletted(path):
-                # Fast octree quantisation (~5x quicker than Pillow's default median cut);
-                # frames have a few hundred colours, so 256 lose nothing visible.
-                with Image.open(path) as im:
-                    return im.convert("RGB").quantize(
-                        256, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE
-                    )
-
-            out = self.directory / "run.gif"
-            # Frames are read back one at a time: memory stays at one frame, not the run.
-            paletted(self.paths[0]).save(
-                out,
-                save_all=True,
-                append_images=(paletted(p) for p in self.paths[1:]),
-                duration=int(round(1000 / self.fps)),
-                loop=0,
-            )
-            return out
-        return None
+        """Finish the video; its path, or None."""
+        return self.writer.close()
 
 
 # --------------------------------------------------------------------------- checkpoints
@@ -455,8 +380,6 @@ def run(args) -> int:
         raise UserError(
             f"--{'gif' if args.gif else 'mp4'} needs --render DIR (the frames go there)"
         )
-    if args.fps <= 0:
-        raise UserError(f"--fps: expected a positive number, got {args.fps:g}")
 
     if args.resume:
         if args.overrides or args.seed is not None:
@@ -495,14 +418,15 @@ def run(args) -> int:
 
     frames = None
     if args.render:
-        frames = _Frames(
+        first = world.snapshot()
+        frames = Frames(
             Path(args.render),
             args.size,
             "gif" if args.gif else "mp4" if args.mp4 else None,
             args.fps,
-            track_owners(world, args.owners),
+            track_owners(first, args.owners),
         )
-        frames.add(world.snapshot())
+        frames.add(first)
 
     from tqdm import tqdm
 

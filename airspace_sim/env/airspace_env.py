@@ -10,6 +10,13 @@ waypoint, or when the world takes the aircraft out of play; every agent is trunc
 ``max_cycles`` steps. Agents that ended leave ``env.agents``; their aircraft is then flown
 by the world's built-in autopilot and resolver.
 
+The env is a thin layer over :class:`~airspace_sim.world.World`: route progress (waypoint,
+cross-track error, bearing and distance to the waypoint, arrival) is the world's route
+autopilot's (:meth:`RouteAutopilot.route_geometry`, its capture rule: within one step's
+travel of the waypoint or past it abeam); ``r_safe``, the sensor range and the resolver
+look-ahead that scale the observations are the world's. An agent whose autopilot is not
+``route`` has no waypoint (``has_waypoint`` 0, no progress or deviation terms).
+
 Nothing here imports pygame: the renderer is imported when ``render()`` is first called.
 """
 
@@ -28,12 +35,10 @@ from pettingzoo import ParallelEnv
 from airspace_sim.env import rewards as rw
 from airspace_sim.env import spaces as sp
 from airspace_sim.errors import UserError
+from airspace_sim.world.autopilots import RouteAutopilot
+from airspace_sim.world.snapshot import live_tracks, lookahead_s
 
 RENDER_FPS = 10
-
-
-def _wrap(a):
-    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
 
 
 def load_scenario(scenario, overrides=()):
@@ -128,8 +133,6 @@ class AirspaceParallelEnv(ParallelEnv):
     discrete_actions : Discrete(5) actions instead of a continuous turn rate.
     reward : dict of reward term weights (see :mod:`airspace_sim.env.rewards`).
     agents : which aircraft are agents (see :func:`select_agents`).
-    capture_radius : metres within which a route waypoint counts as reached (at least one
-        step's travel; a waypoint passed abeam counts as reached too, as in the world).
     render_size : (width, height) of rendered frames in pixels.
     """
 
@@ -151,7 +154,6 @@ class AirspaceParallelEnv(ParallelEnv):
         discrete_actions: bool = False,
         reward: dict | None = None,
         agents=None,
-        capture_radius: float = 1000.0,
         render_size: tuple[int, int] = (800, 800),
     ):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -168,31 +170,25 @@ class AirspaceParallelEnv(ParallelEnv):
         self.max_cycles = int(max_cycles) if max_cycles is not None else self.scenario.n_steps
         self.discrete_actions = bool(discrete_actions)
         self.reward_weights = rw.merge_weights(reward)
-        self.capture_radius = float(capture_radius)
         self.render_size = tuple(int(v) for v in render_size)
         self._default_seed = self.scenario.seed if seed is None else int(seed)
         self._seed_rng = None  # draws world seeds for reset(seed=None) after the first
         self._renderer = None
 
-        self.world = self._make_world(self._default_seed)
-        w = self.world
+        self.world = w = self._make_world(self._default_seed)
         self._index = {aid: i for i, aid in enumerate(w.ids)}
-        controlled = np.asarray(w.controlled, dtype=bool)
-        self.possible_agents = [aid for aid, c in zip(w.ids, controlled) if c]
+        self.possible_agents = [aid for aid, c in zip(w.ids, w.controlled) if c]
         if not self.possible_agents:
             raise UserError(f"{self.scenario.source}: no controlled aircraft to be agents")
-        self._agent_idx = np.array([self._index[a] for a in self.possible_agents], dtype=int)
-        self._max_rate = {
-            a: float(np.asarray(w.max_turn_rate)[self._index[a]]) for a in self.possible_agents
-        }
-        n_modes = self._n_modes()
-        sc = self.scenario
+        self._agent_idx = np.array([self._index[a] for a in self.possible_agents], dtype=np.int64)
+        self._slot = {a: k for k, a in enumerate(self.possible_agents)}  # row in _route arrays
+        self._max_rate = {a: float(w.max_turn_rate[self._index[a]]) for a in self.possible_agents}
         self.observation_layout = sp.ObservationLayout(
             n_intruders=int(n_intruders),
-            n_modes=n_modes,
-            sensor_range=float(sc.sensor.range),
-            r_safe=float(sc.separation.r_safe),
-            lookahead=float(sc.resolver.lookahead),
+            n_modes=live_tracks(w).mu.shape[1],
+            sensor_range=w.sensor_range,
+            r_safe=w.r_safe,
+            lookahead=lookahead_s(w),
         )
         # spaces are built once: observation_space(a) returns the same object every call
         self.observation_spaces = {a: self.observation_layout.space() for a in self.possible_agents}
@@ -218,32 +214,22 @@ class AirspaceParallelEnv(ParallelEnv):
 
         return World(self.scenario, seed=seed)
 
-    def _n_modes(self) -> int:
-        tr = getattr(self.world, "tracks", None)
-        mu = getattr(tr, "mu", None)
-        if mu is not None and np.ndim(mu) == 2 and np.shape(mu)[1] > 0:
-            return int(np.shape(mu)[1])
-        from airspace_sim.dynamics import presets
-
-        try:
-            return presets.get(self.scenario.tracker.model).n_modes
-        except UserError:
-            return 3
-
-    def _routes(self):
-        """Per agent: list of waypoints (m) and the start of the first leg."""
-        specs = getattr(self.world, "specs", None)
-        if specs is None:
-            from airspace_sim.scenarios import build_aircraft
-
-            specs = build_aircraft(self.scenario, self.scenario.seed)
-        by_id = {getattr(s, "id", None): s for s in specs}
-        routes = {}
-        for a in self.possible_agents:
-            s = by_id.get(a)
-            wps = [tuple(map(float, p)) for p in getattr(s, "waypoints", [])] if s else []
-            routes[a] = wps
-        return routes
+    def _route_progress(self):
+        """Route geometry of every possible agent from the world's route autopilots, (A,)
+        arrays in ``possible_agents`` order: ``(index, done, cross_track m, bearing rad,
+        distance m)`` as :meth:`RouteAutopilot.route_geometry` (index 0, not done, no
+        waypoint ahead for an agent that flies another autopilot)."""
+        w = self.world
+        n = w.n
+        index, done = np.zeros(n, np.int64), np.zeros(n, bool)
+        cross, bearing, dist = np.zeros(n), np.zeros(n), np.full(n, np.nan)
+        state = w.flight_state()
+        for members, ap in w.autopilots:
+            if isinstance(ap, RouteAutopilot):
+                g = ap.route_geometry(state)
+                index[members], done[members], cross[members], bearing[members], dist[members] = g
+        i = self._agent_idx
+        return index[i], done[i], cross[i], bearing[i], dist[i]
 
     # ----------------------------------------------------------------- reset
     def reset(self, seed: int | None = None, options: dict | None = None):
@@ -259,14 +245,7 @@ class AirspaceParallelEnv(ParallelEnv):
         self.world_seed = world_seed
         self.agents = list(self.possible_agents)
         self.num_cycles = 0
-        w = self.world
-        self._routes_wp = self._routes()
-        self._wp_index = dict.fromkeys(self.possible_agents, 0)
-        pos = np.asarray(w.positions, dtype=float)
-        self._leg_start = {a: tuple(pos[self._index[a]]) for a in self.possible_agents}
-        self._prev_heading = np.asarray(w.headings, dtype=float).copy()
-        self._turn_rate = np.zeros(len(w.ids))
-        self._prev_dist = {a: self._route_geometry(a)[2] for a in self.possible_agents}
+        self._route = self._route_progress()
         if self._renderer is not None:
             self._renderer.reset()
         obs = self._observe_all(self.agents)
@@ -283,61 +262,50 @@ class AirspaceParallelEnv(ParallelEnv):
         if not self.agents:
             raise UserError("step() called with no live agents: call reset() first")
         w = self.world
-        n = len(w.ids)
-        rates = np.full(n, np.nan)
+        unknown = [a for a in actions if a not in self.possible_agents]
+        if unknown:
+            raise UserError(
+                f"actions: unknown agent {unknown[0]!r} (agents: {', '.join(self.possible_agents)})"
+            )
+        rates = np.full(w.n, np.nan)
         commanded = {}
         for a in self.agents:
             if a in actions and actions[a] is not None:
                 r = sp.decode_action(a, actions[a], self._max_rate[a], self.discrete_actions)
                 rates[self._index[a]] = r
                 commanded[a] = r
-        unknown = [a for a in actions if a not in self._index or a not in self.possible_agents]
-        if unknown:
-            raise UserError(
-                f"actions: unknown agent {unknown[0]!r} (agents: {', '.join(self.possible_agents)})"
-            )
         w.step(rates)
         self.num_cycles += 1
-        heading = np.asarray(w.headings, dtype=float)
-        flown = getattr(w, "turn_rates", None)
-        if flown is not None:
-            self._turn_rate = np.asarray(flown, dtype=float).copy()
-        else:
-            self._turn_rate = _wrap(heading - self._prev_heading) / float(w.dt)
-        self._prev_heading = heading.copy()
 
+        prev_index, prev_dist = self._route[0], self._route[4]
+        self._route = self._route_progress()
+        index, done, cross, _, dist = self._route
         acting = list(self.agents)
-        nmac = np.asarray(w.nmac, dtype=bool)
-        los = np.asarray(w.in_los, dtype=bool)
-        conflict = np.asarray(w.conflict, dtype=bool)
-        active = np.asarray(w.active, dtype=bool)
         rewards, terms, truncs, infos = {}, {}, {}, {}
         for a in acting:
-            i = self._index[a]
-            arrived = self._advance_route(a)
-            cross, _, dist, has_wp = self._route_geometry(a)
-            prev = self._prev_dist[a]
+            i, k = self._index[a], self._slot[a]
+            arrived = bool(done[k])  # an acting agent had not finished before this step
+            # distance gained toward the same waypoint (none on the step it changes)
             progress = 0.0
-            if has_wp and prev is not None and dist is not None and not arrived:
-                progress = (prev - dist) / (sp.V_REF * float(w.dt))
-            self._prev_dist[a] = dist
-            rate = commanded.get(a, self._turn_rate[i])
+            if index[k] == prev_index[k] and np.isfinite(dist[k]) and np.isfinite(prev_dist[k]):
+                progress = (prev_dist[k] - dist[k]) / (sp.V_REF * w.dt)
+            rate = commanded.get(a, w.turn_rates[i])
             values = {
-                "los": 0.0 - los[i],
-                "nmac": 0.0 - nmac[i],
-                "conflict": 0.0 - conflict[i],
+                "los": 0.0 - w.in_los[i],
+                "nmac": 0.0 - w.nmac[i],
+                "conflict": 0.0 - w.conflict[i],
                 "heading_change": -((rate / self._max_rate[a]) ** 2) if self._max_rate[a] else 0,
-                "deviation": -min(abs(cross) / self.scenario.separation.r_safe, 1.0),
+                "deviation": -min(abs(cross[k]) / w.r_safe, 1.0),
                 "progress": float(progress),
                 "arrival": float(arrived),
             }
             t = rw.weighted_terms(self.reward_weights, values)
             rewards[a] = float(sum(t.values()))
-            terms[a] = bool(nmac[i] or arrived or not active[i])
+            terms[a] = bool(w.nmac[i] or arrived or not w.active[i])
             truncs[a] = bool(self.num_cycles >= self.max_cycles)
             info = self._base_info(a)
             info["reward_terms"] = t
-            info["arrived"] = bool(arrived)
+            info["arrived"] = arrived
             infos[a] = info
         self.agents = [a for a in acting if not (terms[a] or truncs[a])]
         obs = self._observe_all(acting)
@@ -345,58 +313,7 @@ class AirspaceParallelEnv(ParallelEnv):
             self.render()
         return obs, rewards, terms, truncs, infos
 
-    # ----------------------------------------------------------------- route
-    def _route_geometry(self, a):
-        """(cross-track m, bearing to waypoint rad, distance m or None, has waypoint)."""
-        i = self._index[a]
-        wps = self._routes_wp[a]
-        k = self._wp_index[a]
-        if k >= len(wps):
-            return 0.0, 0.0, None, False
-        p = np.asarray(self.world.positions, dtype=float)[i]
-        wp = np.asarray(wps[k])
-        start = np.asarray(self._leg_start[a]) if k == 0 else np.asarray(wps[k - 1])
-        leg = wp - start
-        L = float(np.hypot(*leg))
-        d = wp - p
-        dist = float(np.hypot(*d))
-        cross = 0.0 if L < 1e-9 else float((leg[0] * (p - start)[1] - leg[1] * (p - start)[0]) / L)
-        return cross, math.atan2(d[1], d[0]), dist, True
-
-    def _advance_route(self, a) -> bool:
-        """Move on to the next waypoint once reached; True on reaching the last one.
-
-        As the world's route autopilot: a waypoint is reached within
-        max(capture_radius, one step's travel) of it, or once passed abeam (beyond the
-        line through it perpendicular to the leg).
-        """
-        wps = self._routes_wp[a]
-        if not wps or self._wp_index[a] >= len(wps):
-            return False
-        i = self._index[a]
-        p = np.asarray(self.world.positions, dtype=float)[i]
-        reach = max(
-            self.capture_radius, float(np.asarray(self.world.speeds)[i]) * float(self.world.dt)
-        )
-        arrived = False
-        while self._wp_index[a] < len(wps):
-            k = self._wp_index[a]
-            wp = np.asarray(wps[k])
-            prev = np.asarray(self._leg_start[a]) if k == 0 else np.asarray(wps[k - 1])
-            to_wp = wp - p
-            passed = float(np.dot(to_wp, wp - prev)) < 0.0
-            if np.hypot(*to_wp) > reach and not passed:
-                break
-            self._wp_index[a] += 1
-            self._prev_dist[a] = None
-            if self._wp_index[a] >= len(wps):
-                arrived = True
-        return arrived
-
     # ----------------------------------------------------------- observation
-    def _observe(self, a) -> np.ndarray:
-        return self._observe_all([a])[a]
-
     def _observe_all(self, agents) -> dict:
         """Observations of ``agents`` (see :mod:`.spaces` for the layout), batched."""
         agents = list(agents)
@@ -405,19 +322,16 @@ class AirspaceParallelEnv(ParallelEnv):
         w = self.world
         lay = self.observation_layout
         idx = np.array([self._index[a] for a in agents], dtype=np.int64)
-        pos = np.asarray(w.positions, dtype=float)[idx]
-        vel = np.asarray(w.velocities, dtype=float)[idx]
-        heading = np.asarray(w.headings, dtype=float)[idx]
-        speed = np.asarray(w.speeds, dtype=float)[idx]
-        advice = np.asarray(w.advice, dtype=float)[idx]
+        pos, vel = w.positions[idx], w.velocities[idx]
+        heading, speed, advice = w.headings[idx], w.speeds[idx], w.advice[idx]
         max_rate = np.array([self._max_rate[a] for a in agents])
-        geo = [self._route_geometry(a) for a in agents]
-        cross = np.array([g[0] for g in geo])
-        rel_b = np.array([g[1] for g in geo]) - heading
-        has_wp = np.array([g[3] for g in geo], dtype=bool)
-        dist = np.array([g[2] if g[3] else 0.0 for g in geo])
+        slot = np.array([self._slot[a] for a in agents], dtype=np.int64)
+        _, _, cross, bearing, dist = (g[slot] for g in self._route)
+        has_wp = np.isfinite(dist)
+        rel_b = bearing - heading
+        dist = np.where(has_wp, dist, 0.0)
         with np.errstate(invalid="ignore", divide="ignore"):
-            rate = np.where(max_rate > 0, self._turn_rate[idx] / max_rate, 0.0)
+            rate = np.where(max_rate > 0, w.turn_rates[idx] / max_rate, 0.0)
         own = np.stack(
             [
                 speed / sp.V_REF,
@@ -430,26 +344,17 @@ class AirspaceParallelEnv(ParallelEnv):
                 np.where(has_wp, dist / (2 * lay.sensor_range), 0.0),
                 has_wp.astype(float),
                 np.where(np.isfinite(advice), advice / math.pi, 0.0),
-                np.asarray(w.conflict, dtype=float)[idx],
-                np.asarray(w.in_los, dtype=float)[idx],
+                w.conflict[idx].astype(float),
+                w.in_los[idx].astype(float),
             ],
             axis=1,
         )
-        tr = w.tracks
-        owner = np.asarray(tr.owner, dtype=np.int64)
-        slot_of = np.full(len(w.ids), -1, dtype=np.int64)
+        tr = live_tracks(w)
+        slot_of = np.full(w.n, -1, dtype=np.int64)  # aircraft -> row in this batch
         slot_of[idx] = np.arange(len(idx))
-        rows = np.flatnonzero(slot_of[owner] >= 0) if owner.size else owner
-        mu = np.asarray(tr.mu)
+        rows = np.flatnonzero(slot_of[tr.owner] >= 0)
         intr = sp.encode_intruders_batch(
-            lay,
-            slot_of[owner[rows]],
-            pos,
-            vel,
-            heading,
-            np.asarray(tr.x)[rows],
-            np.asarray(tr.P)[rows],
-            mu[rows] if mu.ndim == 2 else np.zeros((len(rows), 0)),
+            lay, slot_of[tr.owner[rows]], pos, vel, heading, tr.x[rows], tr.P[rows], tr.mu[rows]
         )
         obs = sp.finish(lay, own, intr)
         return {a: obs[k] for k, a in enumerate(agents)}
@@ -460,11 +365,11 @@ class AirspaceParallelEnv(ParallelEnv):
         return {
             "time": float(w.time),
             "step": int(w.step_count),
-            "conflict": bool(np.asarray(w.conflict)[i]),
-            "in_los": bool(np.asarray(w.in_los)[i]),
-            "nmac": bool(np.asarray(w.nmac)[i]),
-            "advice": float(np.asarray(w.advice, dtype=float)[i]),
-            "waypoint_index": int(self._wp_index[a]),
+            "conflict": bool(w.conflict[i]),
+            "in_los": bool(w.in_los[i]),
+            "nmac": bool(w.nmac[i]),
+            "advice": float(w.advice[i]),
+            "waypoint_index": int(self._route[0][self._slot[a]]),
         }
 
     # ---------------------------------------------------------------- render

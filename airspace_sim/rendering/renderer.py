@@ -1,4 +1,5 @@
-"""Draw world snapshots into RGB frames with pygame, offscreen (works with no display).
+"""Draw :class:`~airspace_sim.world.snapshot.Snapshot` values into RGB frames with pygame,
+offscreen (works with no display).
 
 Frames are drawn on a plain :class:`pygame.Surface`; only :meth:`Renderer.show` opens a
 window. The video driver is never forced to ``dummy`` (that can blank frames); fonts need
@@ -14,11 +15,11 @@ What a frame shows (north up, equal scale on both axes):
   conflict alert, red loss of separation, magenta NMAC;
 - for the selected ownships (the agents by default, else the first aircraft; ringed in
   yellow): each intruder track's estimated position (yellow cross), its 2-σ position
-  ellipse (true scale), predicted positions (dots, every ``prediction_horizon / 6`` s),
-  and the track's mode probabilities as three small bars (straight, left, right);
+  ellipse (true scale), the snapshot's predicted positions (dots over the look-ahead),
+  and the track's mode probabilities as small bars (straight, left, right);
 - a red line joining the two aircraft of each pair in loss of separation;
 - a pink line for the resolver's advised heading on aircraft in conflict;
-- a time label, a scale bar in m / km and a legend.
+- a time label, a scale bar in m / km and a legend (:mod:`.hud`).
 """
 
 from __future__ import annotations
@@ -29,52 +30,23 @@ import sys
 import warnings
 
 import numpy as np
+import pygame
+import pygame.gfxdraw
 
-os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
-import pygame  # noqa: E402
-import pygame.gfxdraw  # noqa: E402
-
-from airspace_sim.rendering.geometry import (  # noqa: E402
+from airspace_sim.rendering.geometry import (
     ViewTransform,
     covariance_ellipse,
     fit_view,
-    format_distance,
     nice_scale_length,
     triangle,
 )
-from airspace_sim.rendering.snapshot import Frame, predict_positions, read_snapshot  # noqa: E402
-
-#: RGB colours used in frames (tests look for some of them).
-COLORS = {
-    "background": (16, 22, 36),
-    "grid": (32, 42, 62),
-    "text": (225, 230, 240),
-    "panel": (8, 12, 22),
-    "agent": (70, 160, 255),
-    "traffic": (235, 235, 235),
-    "clear": (70, 190, 110),
-    "conflict": (255, 185, 30),
-    "los": (240, 55, 45),
-    "nmac": (255, 60, 255),
-    "trail": (120, 135, 160),
-    "track": (255, 225, 90),
-    "prediction": (150, 220, 255),
-    "advice": (255, 110, 180),
-    "mode_straight": (235, 235, 235),
-    "mode_left": (80, 220, 230),
-    "mode_right": (255, 140, 60),
-}
-
-STATE_LABELS = (
-    ("clear", "clear"),
-    ("conflict", "conflict alert"),
-    ("los", "loss of separation"),
-    ("nmac", "NMAC"),
-)
+from airspace_sim.rendering.hud import draw_hud, make_fonts
+from airspace_sim.rendering.style import COLORS, MODE_COLORS
+from airspace_sim.world.snapshot import Snapshot
 
 
 class Renderer:
-    """Turns snapshot dicts into ``(height, width, 3)`` uint8 frames.
+    """Turns :class:`Snapshot` values into ``(height, width, 3)`` uint8 frames.
 
     Parameters
     ----------
@@ -82,10 +54,9 @@ class Renderer:
     view : ``(xmin, xmax, ymin, ymax)`` in metres, or None to fit the first snapshot's
         aircraft (plus a margin) and keep that view for later frames (call :meth:`reset`
         to refit).
-    owners : whose tracks to draw: None (the controlled aircraft, else aircraft 0),
-        ``"all"``, or a list of aircraft ids or indices.
+    owners : whose tracks to draw: None (the controlled aircraft, else the first active
+        aircraft), ``"all"``, or a list of aircraft ids or indices.
     trail_seconds : simulated seconds of past (rendered) positions drawn as a trail (0 = none).
-    prediction_horizon : seconds of track prediction drawn when the snapshot has none.
     show_ids : draw aircraft names; None = only when there are at most 24 aircraft.
     legend : draw the legend; None = only when the frame is at least 560 x 480 pixels.
     """
@@ -97,7 +68,6 @@ class Renderer:
         view=None,
         owners=None,
         trail_seconds: float = 60.0,
-        prediction_horizon: float = 60.0,
         show_ids: bool | None = None,
         legend: bool | None = None,
     ):
@@ -108,14 +78,9 @@ class Renderer:
         self._given_view = None if view is None else tuple(float(v) for v in view)
         self.owners = owners
         self.trail_seconds = float(trail_seconds)
-        self._last_time = None
-        self.prediction_horizon = float(prediction_horizon)
         self.show_ids = show_ids
         self.legend = legend if legend is not None else (width >= 560 and height >= 480)
-        pygame.font.init()
-        self._font = pygame.font.Font(None, 18)
-        self._small = pygame.font.Font(None, 15)
-        self._big = pygame.font.Font(None, 22)
+        self._fonts = make_fonts()
         self._surface = pygame.Surface((self.width, self.height))
         self._window = None
         self._warned_no_display = False
@@ -138,39 +103,38 @@ class Renderer:
         return None if self.transform is None else self.transform.view
 
     # ---------------------------------------------------------------- drawing
-    def render(self, snapshot: dict) -> np.ndarray:
+    def render(self, snap: Snapshot) -> np.ndarray:
         """Draw one snapshot; returns a new ``(height, width, 3)`` uint8 array."""
-        f = read_snapshot(snapshot)
+        if not isinstance(snap, Snapshot):
+            raise TypeError(f"Renderer.render: expected a Snapshot, got {type(snap).__name__}")
         if self.transform is None:
-            pad = f.r_safe / 2 if f.r_safe else 0.0
-            pos = f.positions[f.active] if f.active.any() else f.positions
-            self.transform = ViewTransform(fit_view(pos, pad=pad), self.width, self.height)
-        self._update_trails(f)
+            pos = snap.positions[snap.active] if snap.active.any() else snap.positions
+            view = fit_view(pos, pad=snap.r_safe / 2)
+            self.transform = ViewTransform(view, self.width, self.height)
+        self._update_trails(snap)
         s = self._surface
         s.fill(COLORS["background"])
         self._draw_grid(s)
-        self._draw_trails(s, f)
-        self._draw_protected(s, f)
-        self._draw_pairs(s, f)
-        self._draw_tracks(s, f)
-        self._draw_aircraft(s, f)
-        self._draw_hud(s, f)
+        self._draw_trails(s, snap)
+        self._draw_protected(s, snap)
+        self._draw_pairs(s, snap)
+        self._draw_tracks(s, snap)
+        self._draw_aircraft(s, snap)
+        draw_hud(s, snap, self._fonts, self.transform, self.legend)
         return np.ascontiguousarray(pygame.surfarray.array3d(s).transpose(1, 0, 2))
 
     def _px(self, xy) -> np.ndarray:
         return self.transform.to_pixels(xy)
 
-    def _update_trails(self, f: Frame) -> None:
+    def _update_trails(self, f: Snapshot) -> None:
         if self.trail_seconds <= 0:
             return
         if self._last_time is not None and f.time < self._last_time:
             self._trails.clear()  # time went back: a new episode
         self._last_time = f.time
         horizon = f.time - self.trail_seconds
-        for i, name in enumerate(f.ids):
-            if not f.active[i]:
-                continue
-            trail = self._trails.setdefault(name, [])
+        for i in np.flatnonzero(f.active):
+            trail = self._trails.setdefault(f.ids[i], [])
             p = (f.time, float(f.positions[i, 0]), float(f.positions[i, 1]))
             if not trail or trail[-1][1:] != p[1:]:
                 trail.append(p)
@@ -190,15 +154,16 @@ class Renderer:
             py = t.to_pixels([0.0, gy])[1]
             pygame.draw.line(s, COLORS["grid"], (0, py), (self.width, py))
 
-    def _draw_trails(self, s, f: Frame) -> None:
-        for i, name in enumerate(f.ids):
-            trail = self._trails.get(name)
-            if not f.active[i] or not trail or len(trail) < 2:
+    def _draw_trails(self, s, f: Snapshot) -> None:
+        for i in np.flatnonzero(f.active):
+            trail = self._trails.get(f.ids[i])
+            if not trail or len(trail) < 2:
                 continue
             pts = self._px(np.asarray(trail)[:, 1:])
             pygame.draw.lines(s, COLORS["trail"], False, [tuple(p) for p in pts], 1)
 
-    def _state_color(self, f: Frame, i: int):
+    @staticmethod
+    def _state_color(f: Snapshot, i: int):
         if f.nmac[i]:
             return COLORS["nmac"]
         if f.in_los[i]:
@@ -207,8 +172,8 @@ class Renderer:
             return COLORS["conflict"]
         return COLORS["clear"]
 
-    def _draw_protected(self, s, f: Frame) -> None:
-        if not f.r_safe:
+    def _draw_protected(self, s, f: Snapshot) -> None:
+        if not f.r_safe > 0:
             return
         r = max(2, int(round(self.transform.length(f.r_safe / 2))))
         pts = self._px(f.positions)
@@ -224,17 +189,14 @@ class Renderer:
                 pygame.gfxdraw.aacircle(overlay, x, y, r - 1, (*col, 255))
         s.blit(overlay, (0, 0))
 
-    def _draw_pairs(self, s, f: Frame) -> None:
+    def _draw_pairs(self, s, f: Snapshot) -> None:
         """A red line between the two aircraft of every pair in loss of separation."""
-        if f.los_pairs is None or len(f.los_pairs) == 0:
-            return
         pts = self._px(f.positions)
         for i, j in f.los_pairs:
-            if 0 <= i < f.n and 0 <= j < f.n:
-                col = COLORS["nmac"] if (f.nmac[i] and f.nmac[j]) else COLORS["los"]
-                pygame.draw.line(s, col, tuple(pts[i]), tuple(pts[j]), 2)
+            col = COLORS["nmac"] if (f.nmac[i] and f.nmac[j]) else COLORS["los"]
+            pygame.draw.line(s, col, tuple(pts[i]), tuple(pts[j]), 2)
 
-    def _selected_owners(self, f: Frame) -> np.ndarray:
+    def _selected_owners(self, f: Snapshot) -> np.ndarray:
         if self.owners is None:
             sel = np.flatnonzero(f.controlled & f.active)
             return sel if len(sel) else np.flatnonzero(f.active)[:1]
@@ -248,38 +210,31 @@ class Renderer:
                 idx.append(f.ids.index(str(o)))
         return np.asarray(idx, dtype=int)
 
-    def _draw_tracks(self, s, f: Frame) -> None:
+    def _draw_tracks(self, s, f: Snapshot) -> None:
         tr = f.tracks
         owners = self._selected_owners(f)
         for i in owners:
             p = self._px(f.positions[i])
             pygame.gfxdraw.aacircle(s, int(p[0]), int(p[1]), 13, COLORS["track"])
-        if tr is None or len(tr.owner) == 0 or len(owners) == 0:
+        if len(tr) == 0 or len(owners) == 0:
             return
         rows = np.flatnonzero(np.isin(tr.owner, owners) & np.all(np.isfinite(tr.x[:, :4]), 1))
-        if len(rows) == 0:
-            return
-        if tr.predicted is not None:
-            pred = tr.predicted[rows]
-        else:
-            pred = predict_positions(tr.x[rows], self.prediction_horizon, 6)
         overlay = pygame.Surface((self.width, self.height), pygame.SRCALPHA)
-        for k, row in enumerate(rows):
+        for row in rows:
             mean = tr.x[row, [0, 2]]
             c = self._px(mean)
             if not _on_screen(c[0], c[1], 40, self.width, self.height):
                 continue
             # predicted path: a faint line through the predicted points
-            path = self._px(pred[k])
+            path = self._px(f.predicted[row])
             path = path[np.all(np.isfinite(path), axis=1)]
             if len(path):
                 pts = [(int(c[0]), int(c[1]))] + [tuple(map(int, q)) for q in path]
                 pygame.draw.lines(overlay, (*COLORS["prediction"], 70), False, pts, 1)
             for q in path:
-                if np.all(np.isfinite(q)):
-                    pygame.gfxdraw.filled_circle(
-                        overlay, int(q[0]), int(q[1]), 2, (*COLORS["prediction"], 200)
-                    )
+                pygame.gfxdraw.filled_circle(
+                    overlay, int(q[0]), int(q[1]), 2, (*COLORS["prediction"], 200)
+                )
             # 2-sigma ellipse
             cov = tr.P[row][np.ix_([0, 2], [0, 2])]
             if np.all(np.isfinite(cov)):
@@ -296,23 +251,13 @@ class Renderer:
             # mode probability bars: straight, left, right
             mu = tr.mu[row]
             if mu.size and np.all(np.isfinite(mu)):
-                self._mode_bars(overlay, x + 7, y - 2, mu)
+                _mode_bars(overlay, x + 7, y - 2, mu)
         s.blit(overlay, (0, 0))
 
-    def _mode_bars(self, s, x: int, y_base: int, mu: np.ndarray, height: int = 16) -> None:
-        cols = (COLORS["mode_straight"], COLORS["mode_left"], COLORS["mode_right"])
-        pygame.draw.rect(
-            s, (*COLORS["panel"], 170), (x - 1, y_base - height - 1, 4 * len(mu) + 1, height + 2)
-        )
-        for m, p in enumerate(mu):
-            h = int(round(float(np.clip(p, 0, 1)) * height))
-            col = cols[m % len(cols)]
-            if h > 0:
-                pygame.draw.rect(s, (*col, 255), (x + 4 * m, y_base - h, 3, h))
-
-    def _draw_aircraft(self, s, f: Frame) -> None:
+    def _draw_aircraft(self, s, f: Snapshot) -> None:
         pts = self._px(f.positions)
         show_ids = self.show_ids if self.show_ids is not None else f.n <= 24
+        small = self._fonts.small
         for i in np.flatnonzero(f.active):
             c = pts[i]
             if not _on_screen(c[0], c[1], 10, self.width, self.height):
@@ -321,111 +266,14 @@ class Renderer:
             tri = [tuple(p) for p in triangle(c, f.headings[i], 9.0)]
             pygame.gfxdraw.filled_polygon(s, tri, col)
             pygame.gfxdraw.aapolygon(s, tri, col)
-            if f.advice is not None and f.conflict[i] and np.isfinite(f.advice[i]):
+            if f.conflict[i] and np.isfinite(f.advice[i]):
                 h = f.headings[i] + f.advice[i]
                 end = c + 26 * np.array([math.cos(h), -math.sin(h)])
                 pygame.draw.line(s, COLORS["advice"], tuple(c), tuple(end), 2)
                 pygame.draw.circle(s, COLORS["advice"], tuple(map(int, end)), 3)
             if show_ids:
-                label = self._small.render(f.ids[i], True, COLORS["text"])
+                label = small.render(f.ids[i], True, COLORS["text"])
                 s.blit(label, (c[0] + 10, c[1] + 6))
-
-    def _draw_hud(self, s, f: Frame) -> None:
-        # time label, top left
-        minutes, seconds = divmod(f.time, 60.0)
-        text = f"t = {f.time:7.1f} s  ({int(minutes):d}:{seconds:04.1f})"
-        if f.step is not None:
-            text += f"   step {f.step}"
-        n_act = int(f.active.sum())
-        sub = (
-            f"{n_act} aircraft   conflict {int((f.conflict & f.active).sum())}   "
-            f"LoS {int((f.in_los & f.active).sum())}   NMAC {int((f.nmac & f.active).sum())}"
-        )
-        self._panel(s, 8, 8, [(text, self._big), (sub, self._font)])
-        self._draw_scale_bar(s)
-        if self.legend:
-            self._draw_legend(s, f)
-
-    def _panel(self, s, x: int, y: int, lines, align_right: bool = False) -> None:
-        rendered = [font.render(t, True, COLORS["text"]) for t, font in lines]
-        w = max(r.get_width() for r in rendered) + 12
-        h = sum(r.get_height() + 3 for r in rendered) + 8
-        if align_right:
-            x = x - w
-        bg = pygame.Surface((w, h), pygame.SRCALPHA)
-        bg.fill((*COLORS["panel"], 200))
-        s.blit(bg, (x, y))
-        yy = y + 5
-        for r in rendered:
-            s.blit(r, (x + 6, yy))
-            yy += r.get_height() + 3
-
-    def _draw_scale_bar(self, s) -> None:
-        t = self.transform
-        length = nice_scale_length(0.25 * self.width / t.scale)
-        px = t.length(length)
-        x0, y0 = 18, self.height - 22
-        bg = pygame.Surface((int(px) + 24, 40), pygame.SRCALPHA)
-        bg.fill((*COLORS["panel"], 200))
-        s.blit(bg, (x0 - 10, y0 - 28))
-        pygame.draw.line(s, COLORS["text"], (x0, y0), (x0 + px, y0), 3)
-        for xx in (x0, x0 + px / 2, x0 + px):
-            pygame.draw.line(s, COLORS["text"], (xx, y0 - 6), (xx, y0 + 3), 2)
-        label = self._font.render(format_distance(length), True, COLORS["text"])
-        s.blit(label, (x0 + px / 2 - label.get_width() / 2, y0 - 24))
-
-    def _draw_legend(self, s, f: Frame) -> None:
-        rows = [
-            ("tri", COLORS["agent"], "agent aircraft"),
-            ("tri", COLORS["traffic"], "traffic"),
-        ]
-        radius_label = "r_safe/2 circle (touch = LoS)"
-        if f.r_safe:
-            radius_label = f"r_safe/2 = {format_distance(f.r_safe / 2)} circle (touch = LoS)"
-        rows.append(("text", None, radius_label))
-        for key, label in STATE_LABELS:
-            rows.append(("circle", COLORS[key], label))
-        rows += [
-            ("cross", COLORS["track"], "track estimate + 2-sigma ellipse"),
-            ("dot", COLORS["prediction"], "predicted positions"),
-            ("bars", None, "modes: " + (" / ".join(f.mode_names[:3]) or "straight / left / right")),
-            ("ring", COLORS["track"], "ownship whose tracks are shown"),
-            ("line", COLORS["advice"], "resolver advice (in conflict)"),
-        ]
-        line_h = 17
-        w = 262
-        h = line_h * len(rows) + 10
-        x0 = self.width - w - 8
-        y0 = 8
-        bg = pygame.Surface((w, h), pygame.SRCALPHA)
-        bg.fill((*COLORS["panel"], 200))
-        s.blit(bg, (x0, y0))
-        for k, (kind, col, label) in enumerate(rows):
-            cy = y0 + 5 + k * line_h + line_h // 2
-            cx = x0 + 14
-            if kind == "tri":
-                tri = [tuple(p) for p in triangle((cx, cy), math.pi / 2, 7.0)]
-                pygame.gfxdraw.filled_polygon(s, tri, col)
-            elif kind == "circle":
-                pygame.gfxdraw.filled_circle(s, cx, cy, 6, tuple(c // 3 for c in col))
-                pygame.gfxdraw.aacircle(s, cx, cy, 6, col)
-            elif kind == "cross":
-                pygame.draw.line(s, col, (cx - 4, cy - 4), (cx + 4, cy + 4), 2)
-                pygame.draw.line(s, col, (cx - 4, cy + 4), (cx + 4, cy - 4), 2)
-            elif kind == "dot":
-                pygame.gfxdraw.filled_circle(s, cx, cy, 2, col)
-                pygame.gfxdraw.filled_circle(s, cx + 6, cy - 2, 2, col)
-            elif kind == "line":
-                pygame.draw.line(s, col, (cx - 7, cy + 3), (cx + 5, cy - 3), 2)
-                pygame.draw.circle(s, col, (cx + 5, cy - 3), 3)
-            elif kind == "ring":
-                pygame.gfxdraw.aacircle(s, cx, cy, 7, col)
-            elif kind == "bars":
-                cols = (COLORS["mode_straight"], COLORS["mode_left"], COLORS["mode_right"])
-                for m, hh in enumerate((10, 5, 3)):
-                    pygame.draw.rect(s, cols[m], (cx - 6 + 4 * m, cy + 5 - hh, 3, hh))
-            text = self._small.render(label, True, COLORS["text"])
-            s.blit(text, (x0 + 28, cy - text.get_height() // 2))
 
     # ------------------------------------------------------------------ human
     def show(self, frame: np.ndarray) -> None:
@@ -472,3 +320,16 @@ def _visible_box(t: ViewTransform):
 
 def _on_screen(x, y, r, w, h) -> bool:
     return np.isfinite(x) and np.isfinite(y) and -r <= x <= w + r and -r <= y <= h + r
+
+
+def _mode_bars(s, x: int, y_base: int, mu: np.ndarray, height: int = 16) -> None:
+    """One bar per mode probability, ``height`` px for 1, left edge at x, base at y_base."""
+    pygame.draw.rect(
+        s, (*COLORS["panel"], 170), (x - 1, y_base - height - 1, 4 * len(mu) + 1, height + 2)
+    )
+    for m, p in enumerate(mu):
+        h = int(round(float(np.clip(p, 0, 1)) * height))
+        if h > 0:
+            pygame.draw.rect(
+                s, (*MODE_COLORS[m % len(MODE_COLORS)], 255), (x + 4 * m, y_base - h, 3, h)
+            )

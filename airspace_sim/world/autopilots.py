@@ -162,6 +162,42 @@ class RouteAutopilot:
         along = d[:, 0] * np.cos(self.heading0) + d[:, 1] * np.sin(self.heading0)
         return np.where(self.count == 0, along, out)
 
+    def route_geometry(self, state):
+        """Where each member stands on its route, by this autopilot's own capture rule.
+
+        Returns ``(index, done, cross_track, bearing, distance)``, each (k,) over the
+        members: ``index`` int, the waypoint being flown to (its number of waypoints once
+        finished); ``done`` bool, finished (the last waypoint reached: the aircraft leaves
+        the world); ``cross_track`` m, signed distance from the line of the current leg
+        (from the previous waypoint, or the start position, to ``index``), + left of it
+        (CCW); ``bearing`` rad CCW from east, from the aircraft to the waypoint;
+        ``distance`` m to the waypoint. With no waypoint ahead (finished, or no waypoints)
+        ``cross_track`` and ``bearing`` are 0 and ``distance`` NaN.
+
+        Read it after :meth:`after_step` of the same step (as the world does), so that
+        ``index`` belongs to the positions in ``state``.
+        """
+        tgt, prev = self._target()
+        pos = state.positions[self.members]
+        ahead = (self.count > 0) & ~self.done
+        leg = tgt - prev
+        rel = pos - prev
+        length = np.hypot(leg[:, 0], leg[:, 1])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            cross = np.where(
+                length > 1e-9, (leg[:, 0] * rel[:, 1] - leg[:, 1] * rel[:, 0]) / length, 0.0
+            )
+        d = tgt - pos
+        bearing = np.arctan2(d[:, 1], d[:, 0])
+        distance = np.hypot(d[:, 0], d[:, 1])
+        return (
+            self.index.copy(),
+            self.done.copy(),
+            np.where(ahead, cross, 0.0),
+            np.where(ahead, bearing, 0.0),
+            np.where(ahead, distance, np.nan),
+        )
+
 
 class MarkovAutopilot:
     """The paper's jump-Markov pilot (§II): modes straight / left / right at the preset's turn

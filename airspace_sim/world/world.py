@@ -39,22 +39,13 @@ from airspace_sim import registry
 from airspace_sim.dynamics import presets
 from airspace_sim.errors import UserError
 from airspace_sim.geometry import wrap_angle
+from airspace_sim.world import snapshot as snapshots
 from airspace_sim.world import streams
 from airspace_sim.world.autopilots import AutopilotContext, FlightState
 from airspace_sim.world.bodies import LOS, NMAC, RANGE, Airspace
 from airspace_sim.world.metrics import WorldMetrics
 from airspace_sim.world.policy import AvoidancePolicy
 from airspace_sim.world.trackers import TrackTable
-
-#: Number of predicted points per track in :meth:`World.snapshot`.
-PREDICTION_POINTS = 6
-
-
-def _predict(x: np.ndarray, horizon: float, n_points: int) -> np.ndarray:
-    """Coordinated-turn extrapolation of (P, 5) states at ``horizon·k/n_points`` s, (P, S, 2)."""
-    from airspace_sim.geometry import coordinated_turn_positions
-
-    return coordinated_turn_positions(x, horizon * np.arange(1, n_points + 1) / n_points)
 
 
 class World:
@@ -170,7 +161,8 @@ class World:
         self._motion(rate)
         self._sense_track_detect(first=False)
 
-    def _flight_state(self) -> FlightState:
+    def flight_state(self) -> FlightState:
+        """The true kinematic state as autopilots see it (arrays, not copies)."""
         return FlightState(
             self.positions, self.headings, self.speeds, self.max_turn_rate, self.dt, self.step_count
         )
@@ -178,7 +170,7 @@ class World:
     def _commands(self, heading_rate) -> np.ndarray:
         """Phase 1: (N,) turn rates, rad/s, clipped to the limits (0 for inactive)."""
         n = self.n
-        state = self._flight_state()
+        state = self.flight_state()
         rate = np.zeros(n)
         desired = np.full(n, np.nan)
         for members, ap in self.autopilots:
@@ -217,7 +209,7 @@ class World:
         )
         self.step_count += 1
         self.time = self.step_count * dt
-        state = self._flight_state()
+        state = self.flight_state()
         finished = np.zeros(self.n, dtype=bool)
         for members, ap in self.autopilots:
             finished[members] = ap.after_step(state)
@@ -318,7 +310,7 @@ class World:
 
     def progress(self) -> np.ndarray:
         """(N,) planned distance covered so far per aircraft, m (NaN: no plan, e.g. Markov)."""
-        state = self._flight_state()
+        state = self.flight_state()
         out = np.full(self.n, np.nan)
         for members, ap in self.autopilots:
             out[members] = ap.progress(state)
@@ -333,93 +325,6 @@ class World:
         ``track_steps``."""
         return self.metrics_acc.report(self.step_count, self.time, self.progress(), self._has_plan)
 
-    def snapshot(self, prediction_points: int = PREDICTION_POINTS) -> dict:
-        """Everything a renderer or an observer needs, as copies (N aircraft, P tracks,
-        M tracker modes, S = ``prediction_points``). Units SI, angles rad CCW from east.
-
-        =====================  ============  ================================================
-        key                    shape         meaning
-        =====================  ============  ================================================
-        ``time``               float         simulated time, s
-        ``step``               int           steps taken
-        ``dt``                 float         world step, s
-        ``ids``                (N,) str      aircraft ids
-        ``positions``          (N, 2)        true positions, m
-        ``velocities``         (N, 2)        true velocities, m/s (0 for inactive aircraft)
-        ``headings``           (N,)          true headings, rad
-        ``speeds``             (N,)          ground speeds, m/s
-        ``turn_rates``         (N,)          turn rate flown in the last step, rad/s
-        ``max_turn_rate``      (N,)          turn-rate limits, rad/s
-        ``active``             (N,) bool     still flying
-        ``controlled``         (N,) bool     RL agents
-        ``avoid``              (N,) bool     runs the resolver
-        ``modes``              (N,) int      true Markov mode over the last step, −1 if none
-        ``in_los``             (N,) bool     within r_safe of another aircraft
-        ``nmac``               (N,) bool     within the NMAC distance of another aircraft
-        ``conflict``           (N,) bool     resolver predicts a conflict at current heading
-        ``advice``             (N,)          resolver heading change for the next step, rad
-        ``r_safe``             float         protected-zone radius, m (pymunk circles r/2)
-        ``nmac_distance``      float         NMAC distance, m
-        ``sensor_range``       float         surveillance range, m
-        ``lookahead``          float         resolver look-ahead, s
-        ``mode_names``         (M,) str      tracker mode names (straight, left, right)
-        ``tracks``             dict          ``owner`` (P,) int, ``intruder`` (P,) int,
-                                             ``x`` (P, 5) ``[x, vx, y, vy, Ω]`` (m, m/s,
-                                             rad/s), ``P`` (P, 5, 5), ``mu`` (P, M),
-                                             ``misses`` (P,) int, ``age`` (P,) steps
-        ``track_owner`` etc.   as above      the same arrays, flat (``track_owner``,
-                                             ``track_intruder``, ``track_x``, ``track_P``,
-                                             ``track_mu``)
-        ``predicted``          (P, S, 2)     track positions extrapolated (estimated turn
-                                             rate Ω) at lookahead·k/S s, k = 1..S, m
-        ``los_pairs``          (L, 2) int    aircraft index pairs (i < j) in LoS
-        ``nmac_pairs``         (Q, 2) int    aircraft index pairs (i < j) in NMAC
-        =====================  ============  ================================================
-        """
-        t = self.tracks.view()
-        x = np.array(t.x)
-        tracks = {
-            "owner": t.owner.copy(),
-            "intruder": t.intruder.copy(),
-            "x": x,
-            "P": np.array(t.P),
-            "mu": np.array(t.mu),
-            "misses": t.misses.copy(),
-            "age": t.age.copy(),
-        }
-        los_i, los_j = self.airspace.pair_arrays(LOS)
-        nm_i, nm_j = self.airspace.pair_arrays(NMAC)
-        snap = {
-            "time": float(self.time),
-            "step": int(self.step_count),
-            "dt": self.dt,
-            "ids": np.array(self.ids, dtype=str),
-            "positions": self.positions.copy(),
-            "velocities": self.velocities.copy(),
-            "headings": self.headings.copy(),
-            "speeds": self.speeds.copy(),
-            "turn_rates": self.turn_rates.copy(),
-            "max_turn_rate": self.max_turn_rate.copy(),
-            "active": self.active.copy(),
-            "controlled": self.controlled.copy(),
-            "avoid": self.avoid.copy(),
-            "modes": self.modes.copy(),
-            "in_los": self.in_los.copy(),
-            "nmac": self.nmac.copy(),
-            "conflict": self.conflict.copy(),
-            "advice": self.advice.copy(),
-            "r_safe": self.r_safe,
-            "nmac_distance": self.nmac_distance,
-            "sensor_range": self.sensor_range,
-            "lookahead": self.lookahead,
-            "mode_names": np.array(self.tracks.mode_names, dtype=str),
-            "tracks": tracks,
-            "predicted": _predict(x, self.lookahead, prediction_points)
-            if len(x)
-            else np.zeros((0, prediction_points, 2)),
-            "los_pairs": np.stack([los_i, los_j], axis=1),
-            "nmac_pairs": np.stack([nm_i, nm_j], axis=1),
-        }
-        for k in ("owner", "intruder", "x", "P", "mu"):
-            snap[f"track_{k}"] = tracks[k]
-        return snap
+    def snapshot(self, prediction_points: int = snapshots.PREDICTION_POINTS):
+        """The world now, as a read-only :class:`~airspace_sim.world.snapshot.Snapshot`."""
+        return snapshots.snapshot(self, prediction_points)
