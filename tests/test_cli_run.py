@@ -356,16 +356,174 @@ def test_checkpoint_resume_matches_uninterrupted_run(tmp_path, monkeypatch, caps
     assert second["overrides"] == ["traffic.count=8"]
 
 
-def test_resume_errors(tmp_path, monkeypatch, capsys):
+RING6 = ["ring", "--set", "traffic.count=6", "--set", "traffic.radius=10000.0"]
+RING6 += ["--set", "resolver.kind=none"]
+
+
+@needs_world
+def test_checkpoint_stores_the_world_and_resumes_it_bit_for_bit(tmp_path, monkeypatch, capsys):
+    # Saved at 43 s, in the middle of the ring's LoS and NMAC episodes (pairs overlapping,
+    # tracks alive); resumed through the separations until every aircraft has left. Oracles: the uninterrupted run's summary and its final world.
+    from test_pickle import world_state
+
+    from airspace_sim.commands.run import load_checkpoint
+
     monkeypatch.chdir(tmp_path)
+    whole_ckpt, part = tmp_path / "whole.ckpt", tmp_path / "part.ckpt"
+    whole = _run_json(
+        capsys, tmp_path / "w.json", *RING6, "--steps", "100", "--checkpoint", str(whole_ckpt)
+    )
+    first = _run_json(
+        capsys, tmp_path / "a.json", *RING6, "--steps", "43", "--checkpoint", str(part)
+    )
+    assert first["metrics"]["los_events"] > 0
+
+    # the checkpoint holds the world at step 43: loading it takes no step
+    def no_stepping(self, *args, **kwargs):
+        raise AssertionError("load_checkpoint stepped the world (a replay)")
+
+    with monkeypatch.context() as m:
+        m.setattr(World, "step", no_stepping)
+        saved, meta = load_checkpoint(part)
+    assert saved.step_count == 43 and saved.in_los.any() and len(saved.tracks) > 0
+    assert meta["total_steps"] == 43 and meta["overrides"] == RING6[2::2]
+
+    rest = _run_json(
+        capsys,
+        tmp_path / "b.json",
+        "--resume",
+        str(part),
+        "--steps",
+        "57",
+        "--checkpoint",
+        str(part),
+    )
+    assert whole["all_left"] and 43 < whole["steps"] < 100  # everybody left: both stop there
+    assert rest["steps"] == whole["steps"] - 43 and rest["total_steps"] == whole["steps"]
+    assert rest["metrics"] == whole["metrics"]
+    assert rest["simulated_time"] == whole["simulated_time"]
+    final_whole, _ = load_checkpoint(whole_ckpt)
+    final_rest, _ = load_checkpoint(part)
+    assert world_state(final_rest) == world_state(final_whole)
+
+
+def _checkpoint_bytes(tmp_path, capsys) -> bytes:
+    path = tmp_path / "good.ckpt"
+    proc = main_in_process(
+        capsys, "run", "head_on", "--steps", "2", "--checkpoint", str(path), "--quiet"
+    )
+    assert proc.returncode == 0, proc.stderr
+    return path.read_bytes()
+
+
+def _header_and_payload(data: bytes):
+    magic, fmt, header, payload = data.split(b"\n", 3)
+    return magic + b"\n", fmt + b"\n", json.loads(header), payload
+
+
+def _with_payload(data: bytes, payload: bytes) -> bytes:
+    import hashlib
+
+    magic, fmt, header, _ = _header_and_payload(data)
+    header["world_bytes"] = len(payload)
+    header["world_sha256"] = hashlib.sha256(payload).hexdigest()
+    return magic + fmt + json.dumps(header).encode() + b"\n" + payload
+
+
+class _TouchOnUnpickle:
+    """Unpickling this creates a file: proof that a refused file was never unpickled."""
+
+    def __init__(self, marker):
+        self.marker = str(marker)
+
+    def __reduce__(self):
+        return (Path.touch, (Path(self.marker),))
+
+
+@needs_world
+def test_resume_refuses_files_that_are_not_checkpoints(tmp_path, monkeypatch, capsys):
+    import pickle
+
+    monkeypatch.chdir(tmp_path)
+    good = _checkpoint_bytes(tmp_path, capsys)
+    marker = tmp_path / "unpickled"
+    evil = pickle.dumps(_TouchOnUnpickle(marker))
+    magic, fmt, header, payload = _header_and_payload(good)
+    other_format = good.replace(b"format 2\n", b"format 3\n", 1)
+    assert other_format != good
+    flipped = bytearray(good)
+    flipped[-20] ^= 0xFF
+    cases = {
+        "random.bin": (np.random.default_rng(0).bytes(4096), "not an airspace-sim checkpoint"),
+        "empty.ckpt": (b"", "not an airspace-sim checkpoint"),
+        "a-pickle.pkl": (evil, "not an airspace-sim checkpoint"),
+        "old-format-1.pkl": (
+            pickle.dumps({"format": 1, "meta": {}, "world": None}),
+            "not an airspace-sim checkpoint",
+        ),
+        "format3.ckpt": (other_format, "checkpoint format 3, this airspace-sim reads format 2"),
+        "truncated.ckpt": (good[: len(good) // 2], "truncated or damaged checkpoint"),
+        "longer.ckpt": (good + b"x", "truncated or damaged checkpoint"),
+        "header-cut.ckpt": (magic + fmt + b'{"meta": ', "damaged checkpoint header"),
+        "no-format.ckpt": (magic, "damaged checkpoint header (no format line)"),
+        "flipped.ckpt": (bytes(flipped), "damaged checkpoint (checksum mismatch)"),
+        "other-object.ckpt": (
+            _with_payload(good, pickle.dumps({"step_count": 3})),
+            "holds a dict, not a World",
+        ),
+    }
+    for name, (data, why) in cases.items():
+        (tmp_path / name).write_bytes(data)
+        proc = main_in_process(capsys, "run", "--resume", name)
+        assert_one_line_error(proc, f"--resume {name}: ", why)
+        assert not marker.exists(), name  # refused before unpickling anything
+    # control: a payload that passes the header and the checksum is unpickled (trusted), then
+    # refused as not a World
+    (tmp_path / "evil-payload.ckpt").write_bytes(_with_payload(good, evil))
+    proc = main_in_process(capsys, "run", "--resume", "evil-payload.ckpt")
+    assert_one_line_error(proc, "holds a NoneType, not a World")
+    assert marker.exists()
     assert_one_line_error(
         main_in_process(capsys, "run", "--resume", "nope.pkl"), "nope.pkl", "no such file"
     )
-    (tmp_path / "junk.pkl").write_bytes(b"not a pickle")
     assert_one_line_error(
-        main_in_process(capsys, "run", "--resume", "junk.pkl"),
-        "junk.pkl",
-        "not a readable checkpoint",
+        main_in_process(capsys, "run", "--resume", str(tmp_path)), str(tmp_path), "is a folder"
+    )
+    # the same through a subprocess: exit status 2, one line, no traceback
+    assert_one_line_error(
+        cli("run", "--resume", "random.bin", cwd=tmp_path),
+        "--resume random.bin: not an airspace-sim checkpoint",
+    )
+
+
+@needs_world
+def test_resume_under_other_code_warns_once(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    good = _checkpoint_bytes(tmp_path, capsys)
+    magic, fmt, header, payload = _header_and_payload(good)
+    header["code"] = "0" * 16
+    (tmp_path / "other.ckpt").write_bytes(
+        magic + fmt + json.dumps(header).encode() + b"\n" + payload
+    )
+    (tmp_path / "same.ckpt").write_bytes(good)
+    proc = main_in_process(capsys, "run", "--resume", "other.ckpt", "--steps", "1", "--quiet")
+    assert proc.returncode == 0
+    assert proc.stderr.count("warning") == 1 and "other.ckpt was saved by other" in proc.stderr
+    proc = main_in_process(capsys, "run", "--resume", "same.ckpt", "--steps", "1", "--quiet")
+    assert proc.returncode == 0 and proc.stderr == ""
+
+
+def test_checkpoint_does_not_overwrite_other_files(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "notes.txt").write_text("precious")
+    assert_one_line_error(
+        main_in_process(capsys, "run", "head_on", "--checkpoint", "notes.txt"),
+        "--checkpoint notes.txt: exists and is not an airspace-sim checkpoint",
+    )
+    assert (tmp_path / "notes.txt").read_text() == "precious"
+    assert_one_line_error(
+        main_in_process(capsys, "run", "head_on", "--checkpoint-every", "3"),
+        "--checkpoint-every needs --checkpoint PATH",
     )
 
 
@@ -455,12 +613,11 @@ def test_periodic_checkpoint_resumes_the_rest_of_the_run(tmp_path, monkeypatch, 
     ckpt = tmp_path / "run.pkl"
     saved = []
 
-    def spy(path, world, scenario, meta):  # Ctrl-C right after the first periodic save
-        how = save_checkpoint(path, world, scenario, meta)
+    def spy(path, world, meta):  # Ctrl-C right after the first periodic save
+        save_checkpoint(path, world, meta)
         saved.append((world.step_count, dict(meta)))
         if len(saved) == 1:
             raise KeyboardInterrupt
-        return how
 
     monkeypatch.setattr(run_cmd, "save_checkpoint", spy)
     proc = main_in_process(
@@ -492,61 +649,3 @@ def test_periodic_checkpoint_resumes_the_rest_of_the_run(tmp_path, monkeypatch, 
     whole = _run_json(capsys, tmp_path / "whole.json", "head_on", "--steps", "9")
     assert rest["steps"] == 5 and rest["total_steps"] == 9
     assert rest["metrics"] == whole["metrics"]
-
-
-class _PicklableWorld:
-    """Stands in for a World that can be pickled (the real one holds pymunk cffi handles)."""
-
-    def __init__(self):
-        self.step_count = 3
-        self.state = [1.0, 2.0]
-
-
-def test_checkpoint_pickles_a_picklable_world(tmp_path):
-    from airspace_sim.commands.run import load_checkpoint, save_checkpoint
-    from airspace_sim.scenarios import load
-
-    meta = {"scenario": "head_on", "source": "x", "seed": 0, "overrides": [], "total_steps": 9}
-    how = save_checkpoint(tmp_path / "c.pkl", _PicklableWorld(), load("head_on"), meta)
-    assert how == "pickle"
-    world, meta2 = load_checkpoint(tmp_path / "c.pkl")
-    assert isinstance(world, _PicklableWorld) and world.state == [1.0, 2.0] and meta2 == meta
-    assert not (tmp_path / "c.pkl.tmp").exists()
-
-
-def test_old_checkpoint_resumes_with_new_fields_defaulted_and_a_warning(tmp_path, capsys):
-    # A checkpoint written before resolver.resume_decay_s existed (its pickled Scenario
-    # lacks the attribute) and by other code: it resumes, with the field at its default and
-    # one warning line.
-    import pickle
-
-    from airspace_sim.commands.run import load_checkpoint, save_checkpoint
-    from airspace_sim.scenarios import load
-    from airspace_sim.world import World
-
-    sc = load("head_on")
-    world = World(sc, seed=0)
-    world.run(4)
-    meta = {
-        "scenario": "head_on",
-        "source": sc.source,
-        "seed": 0,
-        "overrides": [],
-        "total_steps": 9,
-    }
-    path = tmp_path / "old.ckpt"
-    assert save_checkpoint(path, world, sc, meta) == "replay"
-    record = pickle.loads(path.read_bytes())
-    del record["scenario"].resolver.__dict__["resume_decay_s"]
-    del record["code"]
-    path.write_bytes(pickle.dumps(record))
-    capsys.readouterr()
-    resumed, _ = load_checkpoint(path)
-    assert "warning" in capsys.readouterr().err
-    assert resumed.scenario.resolver.resume_decay_s is None
-    assert resumed.step_count == 4
-    np.testing.assert_array_equal(resumed.positions, world.positions)
-    # same code: no warning
-    save_checkpoint(path, world, sc, meta)
-    load_checkpoint(path)
-    assert capsys.readouterr().err == ""

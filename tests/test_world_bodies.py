@@ -130,3 +130,107 @@ def test_tiny_worlds(n):
     world = World(sc)
     world.run(5)
     assert world.step_count == 5
+
+
+# --------------------------------------------------------------------------- pickling
+
+
+def _copies(sp):
+    import copy
+    import pickle
+
+    return [pickle.loads(pickle.dumps(sp)), copy.deepcopy(sp)]
+
+
+def _state(sp, pos):
+    """Everything an airspace step produces: positions (bytes), pair sets, begun pairs."""
+    return (
+        pos.tobytes(),
+        {t: sp.pairs[t].tolist() for t in (LOS, NMAC, RANGE)},
+        {t: sp.began[t].tolist() for t in (LOS, NMAC, RANGE)},
+    )
+
+
+def airspace_pairs(sp, kind):
+    i, j = sp.pair_arrays(kind)
+    return set(zip(i.tolist(), j.tolist()))
+
+
+def test_copy_taken_while_pairs_overlap_fires_separate_and_no_second_begin():
+    # Aircraft 0 and 1 overlap in all three sets when copied; 1 flies away east at 500 m/s,
+    # leaving NMAC (1000 m) after 1 s, LoS (3000 m) after 5 s, range (8000 m) after 15 s,
+    # turns round at 20 s and comes back, so every set separates and begins again.
+    # Aircraft 2 was removed before the copy. Oracles: brute-force distances every step,
+    # and the original stepped with the same velocities.
+    start = np.array([[0.0, 0.0], [500.0, 0.0], [100.0, 100.0], [0.0, 30000.0]])
+    sp = Airspace(start, r_safe=3000.0, nmac=1000.0, sensor_range=8000.0)
+    sp.remove([2])
+    assert [len(sp.pairs[t]) for t in (LOS, NMAC, RANGE)] == [1, 1, 1]
+    copies = _copies(sp)
+    pos = [start.copy() for _ in range(3)]
+    separated, began = set(), set()
+    for k in range(60):
+        v = np.zeros((4, 2))
+        v[1] = (500.0, 0.0) if k < 20 else (-500.0, 0.0)
+        for s, p in zip([sp, *copies], pos):
+            s.set_velocities(v)
+            s.step(1.0, p)
+        for t, r in ((LOS, 3000.0), (NMAC, 1000.0), (RANGE, 8000.0)):
+            expected = brute_pairs(pos[0], r, active=sp.in_space)
+            assert airspace_pairs(sp, t) == expected, (t, k)
+            if not expected:
+                separated.add(t)
+            elif sp.began[t].size:
+                began.add(t)
+            if k < 20:  # going away: nothing begins (a copy without arbiters would begin)
+                assert sp.began[t].size == 0
+        for s, p in zip(copies, pos[1:]):
+            assert _state(s, p) == _state(sp, pos[0]), k
+    assert separated == began == {LOS, NMAC, RANGE}
+
+
+@pytest.mark.parametrize("spatial_hash", [False, True])
+def test_copies_of_a_busy_airspace_step_identically(spatial_hash):
+    # 40 aircraft at 200 m/s turning at random in a 30 km square: pairs begin and end all
+    # the time. The airspace is copied after 20 steps, then all are stepped 80 more with the
+    # same velocities; one aircraft is removed on the way.
+    rng = np.random.default_rng(7)
+    n = 40
+    pos0 = rng.uniform(-15000.0, 15000.0, (n, 2))
+    heading = rng.uniform(-np.pi, np.pi, n)
+    sp = Airspace(pos0, 3000.0, 1000.0, 8000.0, spatial_hash=spatial_hash)
+    pos = pos0.copy()
+
+    def velocities():
+        heading[:] += rng.normal(0.0, 0.2, n)
+        return 200.0 * np.stack([np.cos(heading), np.sin(heading)], axis=1)
+
+    for _ in range(20):
+        sp.set_velocities(velocities())
+        sp.step(1.0, pos)
+    copies = _copies(sp)
+    assert all(c.spatial_hash == spatial_hash for c in copies)
+    cpos = [pos.copy() for _ in copies]
+    events = 0
+    for k in range(80):
+        v = velocities()
+        if k == 30:
+            for s in [sp, *copies]:
+                s.remove([5])
+        for s, p in zip([sp, *copies], [pos, *cpos]):
+            s.set_velocities(v)
+            s.step(1.0, p)
+        for s, p in zip(copies, cpos):
+            assert _state(s, p) == _state(sp, pos), k
+        assert airspace_pairs(sp, LOS) == brute_pairs(pos, 3000.0, active=sp.in_space)
+        events += sum(sp.began[t].shape[0] for t in (LOS, NMAC, RANGE))
+    assert events > 20
+
+
+def test_unpickling_checks_the_rebuilt_contacts_against_the_stored_pairs():
+    sp = Airspace(np.array([[0.0, 0.0], [100.0, 0.0]]), 3000.0, 1000.0, 8000.0)
+    state = sp.__getstate__()
+    state["pairs"][LOS] = np.zeros(0, np.int64)  # claims no LoS although they overlap
+    broken = Airspace.__new__(Airspace)
+    with pytest.raises(RuntimeError, match="set 1 differ from the stored pairs"):
+        broken.__setstate__(state)

@@ -241,21 +241,30 @@ class Frames:
 
 # --------------------------------------------------------------------------- checkpoints
 #
-# A checkpoint holds the validated Scenario, the seed and the number of steps taken, plus
-# the pickled World when the World can be pickled. When it cannot (pymunk's cffi handles),
-# --resume rebuilds World(scenario, seed) and replays the steps: the world is deterministic
-# (every random number is a function of seed, aircraft and step), so the resumed state is
-# the same, at the cost of re-simulating — under the same code: the record carries a
-# fingerprint of the sources, and resuming under other code warns. The scenario is rebuilt
-# through the loader, so fields added since the checkpoint was written take their defaults.
+# A checkpoint is the pickled World behind a header that is read and checked before anything
+# is unpickled:
+#
+#     AIRSPACE-SIM CHECKPOINT\n        magic line
+#     format 2\n                       format version
+#     {"meta": ..., "code": ..., "world_bytes": L, "world_sha256": ...}\n    one JSON line
+#     <L bytes: pickle of the World>
+#
+# A file without the magic line, of another format version, with a malformed header, shorter
+# or longer than the header says, or whose payload does not match its checksum is refused
+# with one line naming the file. The checksum catches damage, not tampering: a checkpoint is
+# a pickle, so resume only files you trust. The header records a fingerprint of the sources;
+# resuming under other code warns (a World pickled by other code may not load or may step
+# differently).
 
-CHECKPOINT_FORMAT = 1
+CHECKPOINT_MAGIC = b"AIRSPACE-SIM CHECKPOINT\n"
+CHECKPOINT_FORMAT = 2
+_MAX_HEADER_BYTES = 1 << 20  # the JSON line holds metadata only
 
 
 def code_fingerprint() -> str:
     """SHA-256 (hex, 16 digits) of the ``airspace_sim`` package's Python sources.
 
-    A replayed checkpoint equals the original run only under the same code; resuming under
+    A checkpoint resumes bit-identically only under the code that wrote it; resuming under
     other code is allowed but warned about (:func:`load_checkpoint`).
     """
     import hashlib
@@ -271,95 +280,125 @@ def code_fingerprint() -> str:
     return h.hexdigest()[:16]
 
 
-def _plain(obj):
-    """A pickled scenario as a TOML-like dict (unset ``None`` fields dropped), so that
-    :func:`~airspace_sim.scenarios.from_dict` can fill fields added since it was saved."""
-    if hasattr(obj, "__dataclass_fields__"):
-        return {k: _plain(v) for k, v in vars(obj).items() if v is not None and k != "source"}
-    if isinstance(obj, (list, tuple)):
-        return [_plain(v) for v in obj]
-    if isinstance(obj, dict):
-        return {k: _plain(v) for k, v in obj.items()}
-    return obj
+def is_checkpoint(path: Path) -> bool:
+    """Whether ``path`` starts with the checkpoint magic line (contents not checked)."""
+    try:
+        with open(path, "rb") as f:
+            return f.read(len(CHECKPOINT_MAGIC)) == CHECKPOINT_MAGIC
+    except OSError:
+        return False
 
 
-def save_checkpoint(path: Path, world, scenario, meta: dict) -> str:
-    """Write a checkpoint to ``path`` atomically; returns ``"pickle"`` or ``"replay"``."""
+def save_checkpoint(path: Path, world, meta: dict) -> None:
+    """Write ``world`` (pickled) and ``meta`` (JSON-able dict) to ``path`` atomically."""
+    import hashlib
     import pickle
 
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise UserError(f"--checkpoint {path}: cannot create folder: {exc}") from None
-    tmp = path.with_name(path.name + ".tmp")
-    record = {
-        "format": CHECKPOINT_FORMAT,
+    blob = pickle.dumps(world, protocol=pickle.HIGHEST_PROTOCOL)
+    header = {
         "meta": meta,
-        "scenario": scenario,
-        "steps_taken": int(world.step_count),
         "code": code_fingerprint(),
+        "steps_taken": int(world.step_count),
+        "world_bytes": len(blob),
+        "world_sha256": hashlib.sha256(blob).hexdigest(),
     }
-    try:
-        blob = pickle.dumps(world, protocol=pickle.HIGHEST_PROTOCOL)
-        record["world"], how = blob, "pickle"
-    except Exception:  # noqa: BLE001 - any unpicklable member: fall back to replay
-        record["world"], how = None, "replay"
+    tmp = path.with_name(path.name + ".tmp")
     try:
         with open(tmp, "wb") as f:
-            pickle.dump(record, f, protocol=pickle.HIGHEST_PROTOCOL)
+            f.write(CHECKPOINT_MAGIC)
+            f.write(f"format {CHECKPOINT_FORMAT}\n".encode())
+            f.write(json.dumps(header, separators=(",", ":")).encode() + b"\n")
+            f.write(blob)
         tmp.replace(path)
     except OSError as exc:
         tmp.unlink(missing_ok=True)
         raise UserError(f"--checkpoint {path}: cannot write: {exc}") from None
-    return how
 
 
-def load_checkpoint(path: Path, quiet: bool = True):
-    """The world saved in ``path`` (unpickled or replayed) and its metadata."""
+def _read_header(path: Path, f) -> dict:
+    """Check the magic line, the format and the JSON header of an open checkpoint file."""
+
+    def refuse(why: str):
+        raise UserError(f"--resume {path}: {why}")
+
+    if f.read(len(CHECKPOINT_MAGIC)) != CHECKPOINT_MAGIC:
+        refuse("not an airspace-sim checkpoint (no checkpoint header)")
+    line = f.readline(64)
+    words = line.split()
+    if len(words) != 2 or words[0] != b"format" or not line.endswith(b"\n"):
+        refuse("damaged checkpoint header (no format line)")
+    if words[1] != str(CHECKPOINT_FORMAT).encode():
+        found = words[1].decode("ascii", "replace")
+        refuse(f"checkpoint format {found}, this airspace-sim reads format {CHECKPOINT_FORMAT}")
+    line = f.readline(_MAX_HEADER_BYTES)
+    try:
+        header = json.loads(line) if line.endswith(b"\n") else None
+    except ValueError:
+        header = None
+    required = {"meta": dict, "code": str, "world_bytes": int, "world_sha256": str}
+    if not isinstance(header, dict) or any(
+        not isinstance(header.get(k), t) for k, t in required.items()
+    ):
+        refuse("damaged checkpoint header")
+    meta_types = {"scenario": str, "seed": int, "overrides": list, "total_steps": int}
+    if any(not isinstance(header["meta"].get(k), t) for k, t in meta_types.items()):
+        refuse("damaged checkpoint header (run metadata)")
+    return header
+
+
+def load_checkpoint(path: Path):
+    """The world saved in ``path`` by :func:`save_checkpoint`, and its metadata.
+
+    Raises :class:`UserError` (one line naming ``path``) for a missing file or one that is
+    not a readable checkpoint; unpickles only after the header and the checksum match.
+    """
+    import hashlib
     import pickle
 
     from airspace_sim import registry
+    from airspace_sim.world import World
 
-    registry.names("tracker")  # plugins first: a pickled world may refer to plugin classes
     try:
         with open(path, "rb") as f:
-            record = pickle.load(f)
+            header = _read_header(path, f)
+            blob = f.read(header["world_bytes"] + 1)
     except FileNotFoundError:
         raise UserError(f"--resume {path}: no such file") from None
-    except Exception as exc:  # noqa: BLE001 - corrupt or foreign file
+    except IsADirectoryError:
+        raise UserError(f"--resume {path}: is a folder, not a checkpoint") from None
+    except OSError as exc:
+        raise UserError(f"--resume {path}: cannot read: {exc}") from None
+    if len(blob) != header["world_bytes"]:
         raise UserError(
-            f"--resume {path}: not a readable checkpoint ({type(exc).__name__}: {exc})"
-        ) from None
-    if not isinstance(record, dict) or record.get("format") != CHECKPOINT_FORMAT:
-        raise UserError(f"--resume {path}: not an airspace-sim checkpoint")
-    meta = record["meta"]
-    if record.get("code") != code_fingerprint():
+            f"--resume {path}: truncated or damaged checkpoint "
+            f"({len(blob)} bytes of world data, expected {header['world_bytes']})"
+        )
+    if hashlib.sha256(blob).hexdigest() != header["world_sha256"]:
+        raise UserError(f"--resume {path}: damaged checkpoint (checksum mismatch)")
+    other_code = header["code"] != code_fingerprint()
+    if other_code:
         print(
             f"airspace-sim: warning: {path} was saved by other airspace_sim code; the resumed "
             f"run may differ from an uninterrupted one",
             file=sys.stderr,
         )
-    if record.get("world") is not None:
-        return pickle.loads(record["world"]), meta
-    from tqdm import tqdm
-
-    from airspace_sim.scenarios import from_dict
-    from airspace_sim.world import World
-
-    saved = record["scenario"]
-    source = getattr(saved, "source", str(path))
-    scenario = from_dict(_plain(saved), source=source)  # fields added since: defaults
-    world = World(scenario, seed=meta["seed"])
-    for _ in tqdm(
-        range(record["steps_taken"]),
-        desc="replaying",
-        unit="step",
-        leave=False,
-        disable=quiet or not sys.stderr.isatty(),
-        file=sys.stderr,
-    ):
-        world.step()
-    return world, meta
+    registry.names("tracker")  # plugins first: a pickled world may refer to plugin classes
+    try:
+        world = pickle.loads(blob)
+    except Exception as exc:  # noqa: BLE001 - e.g. a class that other code renamed
+        first = (str(exc).strip().splitlines() or [""])[0]
+        raise UserError(
+            f"--resume {path}: cannot load the saved world"
+            + (" (saved by other airspace_sim code)" if other_code else "")
+            + f": {type(exc).__name__}: {first}"
+        ) from None
+    if not isinstance(world, World):
+        raise UserError(f"--resume {path}: holds a {type(world).__name__}, not a World")
+    return world, header["meta"]
 
 
 # --------------------------------------------------------------------------- command
@@ -381,10 +420,20 @@ def run(args) -> int:
             f"--{'gif' if args.gif else 'mp4'} needs --render DIR (the frames go there)"
         )
 
+    if args.checkpoint_every and not args.checkpoint:
+        raise UserError("--checkpoint-every needs --checkpoint PATH")
+    if args.checkpoint:
+        target = Path(args.checkpoint)
+        if target.is_dir() or (target.exists() and not is_checkpoint(target)):
+            raise UserError(
+                f"--checkpoint {target}: exists and is not an airspace-sim checkpoint; "
+                "not overwriting it"
+            )
+
     if args.resume:
         if args.overrides or args.seed is not None:
             raise UserError("--resume continues a saved run: --set and --seed cannot change it")
-        world, meta = load_checkpoint(Path(args.resume), quiet=args.quiet)
+        world, meta = load_checkpoint(Path(args.resume))
         if args.scenario and args.scenario not in (meta["scenario"], meta.get("source")):
             raise UserError(
                 f"--resume {args.resume}: it holds scenario {meta['scenario']!r}, "
@@ -396,7 +445,6 @@ def run(args) -> int:
             meta["seed"],
             meta["overrides"],
         )
-        sc = world.scenario
         remaining = max(0, meta["total_steps"] - world.step_count)
         if not args.steps and not remaining:
             raise UserError(
@@ -430,8 +478,6 @@ def run(args) -> int:
 
     from tqdm import tqdm
 
-    if args.checkpoint_every and not args.checkpoint:
-        raise UserError("--checkpoint-every needs --checkpoint PATH")
     planned_total = world.step_count + steps
 
     def checkpoint_meta() -> dict:
@@ -464,7 +510,7 @@ def run(args) -> int:
                 frames.add(world.snapshot())
             bar.update(1)
             if args.checkpoint_every and (k + 1) % args.checkpoint_every == 0 and k + 1 < steps:
-                save_checkpoint(Path(args.checkpoint), world, sc, checkpoint_meta())
+                save_checkpoint(Path(args.checkpoint), world, checkpoint_meta())
             if everybody_left:
                 break
     except KeyboardInterrupt:
@@ -501,7 +547,8 @@ def run(args) -> int:
         meta = checkpoint_meta()
         if not interrupted:  # finished (or everybody left): resuming needs --steps
             meta["total_steps"] = world.step_count
-        summary["checkpoint"] = save_checkpoint(Path(args.checkpoint), world, sc, meta)
+        save_checkpoint(Path(args.checkpoint), world, meta)
+        summary["checkpoint"] = str(args.checkpoint)
     if not args.quiet:
         print(format_table(summary))
         if frames is not None:
@@ -510,7 +557,7 @@ def run(args) -> int:
                 + (f", {video}" if video else "")
             )
         if args.checkpoint:
-            print(f"checkpoint ({summary['checkpoint']}) in {args.checkpoint}")
+            print(f"checkpoint (step {world.step_count}) in {args.checkpoint}")
     if interrupted:
         raise KeyboardInterrupt
     return 0

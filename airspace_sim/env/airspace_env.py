@@ -401,3 +401,12 @@ class AirspaceParallelEnv(ParallelEnv):
         obs = self._observe_all(self.agents)
         zero = np.zeros(self.observation_layout.size, np.float32)
         return np.concatenate([obs.get(a, zero) for a in self.possible_agents])
+
+    # ---------------------------------------------------------------- pickling
+    def __getstate__(self) -> dict:
+        """Everything but the renderer (pygame fonts and surfaces do not pickle): a pickled
+        or deep-copied env makes a new one at its first ``render()``, so its first frame
+        has no trails from before the copy. The world pickles itself."""
+        state = self.__dict__.copy()
+        state["_renderer"] = None
+        return state

@@ -64,6 +64,9 @@ class Airspace:
     ----------
     pairs : dict set → (P,) int64 sorted keys ``i·N + j`` (``i < j``) of overlapping pairs.
     began : dict set → (E, 2) int64 pairs (i < j) that began overlapping in the last step.
+
+    An ``Airspace`` pickles and deep-copies (see :meth:`__getstate__`); the copy steps
+    bit-identically to the original, pair events included.
     """
 
     def __init__(
@@ -76,11 +79,28 @@ class Airspace:
     ):
         positions = np.asarray(positions, dtype=float).reshape(-1, 2)
         self.n = n = positions.shape[0]
+        self.radii = {LOS: r_safe / 2.0, NMAC: nmac / 2.0, RANGE: sensor_range / 2.0}
+        self.spatial_hash = bool(n >= 200 if spatial_hash is None else spatial_hash)
+        self.in_space = np.ones(n, dtype=bool)
+        self.pairs = {t: np.zeros(0, dtype=np.int64) for t in SETS}
+        self.began = {t: np.zeros((0, 2), dtype=np.int64) for t in SETS}
+        self._build(positions, np.zeros((n, 2)))
+        self._drain()  # the pairs that overlap at the start
+
+    # ---------------------------------------------------------------- helpers
+    def _build(self, positions: np.ndarray, velocities: np.ndarray) -> None:
+        """Create the space, the bodies (all N, those in :attr:`in_space` added), the
+        handlers and the batch buffers, and record the contacts at ``positions`` (N, 2) m:
+        a zero-velocity step (``p + 0·dt = p`` exactly) makes pymunk create an arbiter for
+        every overlapping pair and fire its ``begin``, so that the next step fires
+        ``separate`` for a pair that stops overlapping and no second ``begin`` for one that
+        still overlaps. Leaves the body velocities at ``velocities`` (N, 2) m/s and those
+        events in the log."""
+        n = self.n
         self.space = space = pymunk.Space()
         self._log = _EventLog()
         for t in SETS:
             space.on_collision(t, t, begin=self._log.begin, separate=self._log.separate)
-        radii = {LOS: r_safe / 2.0, NMAC: nmac / 2.0, RANGE: sensor_range / 2.0}
         self.bodies: list[pymunk.Body] = []
         self.shapes: list[tuple[pymunk.Shape, ...]] = []
         for i in range(n):
@@ -89,32 +109,27 @@ class Airspace:
             body._aircraft = i
             shapes = []
             for t in SETS:
-                c = pymunk.Circle(body, radii[t])
+                c = pymunk.Circle(body, self.radii[t])
                 c.sensor = True
                 c.collision_type = t
                 c.filter = pymunk.ShapeFilter(categories=1 << t, mask=1 << t)
                 shapes.append(c)
-            space.add(body, *shapes)
+            if self.in_space[i]:
+                space.add(body, *shapes)
             self.bodies.append(body)
             self.shapes.append(tuple(shapes))
-        if spatial_hash is None:
-            spatial_hash = n >= 200
-        if spatial_hash and n:
-            space.use_spatial_hash(float(sensor_range), 3 * n)
-        self.in_space = np.ones(n, dtype=bool)
-        self.pairs = {t: np.zeros(0, dtype=np.int64) for t in SETS}
-        self.began = {t: np.zeros((0, 2), dtype=np.int64) for t in SETS}
+        if self.spatial_hash and n:
+            space.use_spatial_hash(float(2.0 * self.radii[RANGE]), 3 * n)
         self._buf_get = pymunk.batch.Buffer()
         self._buf_set = pymunk.batch.Buffer()
-        self._order = None  # aircraft index of each body in pymunk's iteration order
-        self._refresh_order()
-        # A zero-velocity step finds the pairs that overlap at the start (p + 0·dt = p).
-        self.set_velocities(np.zeros((n, 2)))
-        if n:
+        self._refresh_order()  # aircraft index of each body in pymunk's iteration order
+        if self._order.size:
+            self.set_velocities(np.zeros((n, 2)))
             space.step(1.0)
-        self._drain()
+        self.set_velocities(velocities)
+        for i in np.flatnonzero(~self.in_space):  # bodies outside the space keep theirs too
+            self.bodies[i].velocity = (float(velocities[i, 0]), float(velocities[i, 1]))
 
-    # ---------------------------------------------------------------- helpers
     def _refresh_order(self) -> None:
         ids = {b.id: i for i, b in enumerate(self.bodies)}
         self._buf_get.clear()
@@ -181,3 +196,55 @@ class Airspace:
         k = self.pairs[kind]
         n = max(self.n, 1)
         return k // n, k % n
+
+    # --------------------------------------------------------------- pickling
+    def __getstate__(self) -> dict:
+        """The airspace as plain data: radii, positions (N, 2) m and velocities (N, 2) m/s of
+        all bodies, membership, pair sets and pending events.
+
+        The pymunk objects are not pickled: the batch buffers are cffi memory, and pymunk's
+        own ``Space`` pickling restores cached arbiters that no longer fire ``separate`` (a
+        copy misses the end of every pair that overlapped when it was saved) and costs
+        O(arbiters × shapes). :meth:`__setstate__` rebuilds the space instead.
+        """
+        return {
+            "n": self.n,
+            "radii": dict(self.radii),
+            "spatial_hash": self.spatial_hash,
+            "in_space": self.in_space.copy(),
+            "positions": np.array([tuple(b.position) for b in self.bodies], float).reshape(-1, 2),
+            "velocities": np.array([tuple(b.velocity) for b in self.bodies], float).reshape(-1, 2),
+            "pairs": {t: k.copy() for t, k in self.pairs.items()},
+            "began": {t: b.copy() for t, b in self.began.items()},
+            "events": list(self._log.events),
+        }
+
+    def __setstate__(self, state: dict) -> None:
+        """Rebuild the space from :meth:`__getstate__`'s data, with an arbiter for every pair
+        that overlaps (see :meth:`_build`), and check that those pairs are the stored ones.
+
+        The stored pair sets stay authoritative; the contacts the rebuilt space finds at the
+        same positions must equal them, or the copy would fire other events than the
+        original from the next step on.
+        """
+        self.n = int(state["n"])
+        self.radii = dict(state["radii"])
+        self.spatial_hash = bool(state["spatial_hash"])
+        self.in_space = np.array(state["in_space"], dtype=bool)
+        self._build(np.asarray(state["positions"], float), np.asarray(state["velocities"], float))
+        primed, self._log.events = self._log.events, list(state["events"])
+        self.pairs = {t: np.array(k, dtype=np.int64) for t, k in state["pairs"].items()}
+        self.began = {t: np.array(b, dtype=np.int64) for t, b in state["began"].items()}
+        n = max(self.n, 1)
+        found = {t: set() for t in SETS}
+        for t, i, j, sign in primed:
+            if sign > 0:
+                found[t].add(min(i, j) * n + max(i, j))
+        for t in SETS:
+            if found[t] != set(self.pairs[t].tolist()):
+                extra = sorted(found[t] - set(self.pairs[t].tolist()))
+                missing = sorted(set(self.pairs[t].tolist()) - found[t])
+                raise RuntimeError(
+                    f"Airspace: rebuilt contacts of set {t} differ from the stored pairs "
+                    f"(extra keys {extra[:5]}, missing {missing[:5]})"
+                )
