@@ -242,13 +242,13 @@ def test_overrides_apply_before_validation():
             "traffic.count=64",
             "traffic.radius=70000",
             "sensor.kind=radar",
-            "resolver.params.gain=2.5",
+            "resolver.params.left_penalty=0.1",
             "duration=10",
         ],
     )
     assert sc.traffic.count == 64 and sc.traffic.radius == 70000.0
     assert isinstance(sc.traffic.radius, float)
-    assert sc.resolver.params == {"gain": 2.5}
+    assert sc.resolver.params == {"left_penalty": 0.1}
     assert sc.duration == 10.0
     assert len(build_aircraft(sc, np.random.default_rng(0))) == 64
     # the file itself is untouched
@@ -264,8 +264,14 @@ def test_override_list_index_and_list_value():
 @pytest.mark.parametrize(
     "override, start",
     [
-        ("traffic.count=abc", "--set traffic.count: expected a non-negative integer, got 'abc'"),
-        ("traffic.count=-3", "--set traffic.count: expected a non-negative integer, got -3"),
+        (
+            "traffic.count=abc",
+            "--set traffic.count: expected a non-negative integer up to 10000, got 'abc'",
+        ),
+        (
+            "traffic.count=-3",
+            "--set traffic.count: expected a non-negative integer up to 10000, got -3",
+        ),
         ("traffic.cout=3", "--set traffic.cout: unknown key"),
         ("trafic.count=3", "--set trafic: unknown key"),
         (
@@ -276,7 +282,10 @@ def test_override_list_index_and_list_value():
         ("dt.x=3", "--set dt.x: dt is not a table"),
         ("traffic.count", "--set traffic.count: expected key=value"),
         ("traffic..count=3", "--set traffic..count: malformed key"),
-        ("separation={r_safe = -1}", "--set separation.r_safe: expected a positive number, got -1"),
+        (
+            "separation={r_safe = -1}",
+            "--set separation.r_safe: expected a positive number up to 1e+06 (m), got -1",
+        ),
     ],
 )
 def test_bad_override_is_reported_as_set(override, start):
@@ -388,15 +397,15 @@ def test_random_traffic_too_dense_is_a_user_error():
 
 def test_generated_id_clash_is_a_user_error():
     hand = {"id": "ring00", "position": [0.0, 0.0], "heading_deg": 0.0, "speed": 200.0}
-    sc = from_dict(
-        {
-            "name": "x",
-            "aircraft": [hand],
-            "traffic": {"pattern": "ring", "count": 4, "radius": 20000.0},
-        }
-    )
-    with pytest.raises(UserError, match="ring00"):
-        build_aircraft(sc, 0)
+    # refused by the loader, before any traffic is generated
+    with pytest.raises(UserError, match=r"aircraft\[0\]\.id: .*generated ring.*'ring00'"):
+        from_dict(
+            {
+                "name": "x",
+                "aircraft": [hand],
+                "traffic": {"pattern": "ring", "count": 4, "radius": 20000.0},
+            }
+        )
 
 
 def test_build_does_not_share_hand_placed_objects():

@@ -62,58 +62,20 @@ world step) for those the resolver's constructor accepts, then ``resolver.params
 
 from __future__ import annotations
 
-import inspect
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from airspace_sim import registry
 from airspace_sim.avoidance.bands import CLEAR_TOLERANCE, cpa_min_ratio
 from airspace_sim.errors import UserError
 
 
 def build_resolver(scenario, dt: float):
-    """The scenario's resolver object, with the keyword arguments it accepts."""
-    factory = registry.get("resolver", scenario.resolver.kind)
-    offered = {
-        "r_safe": scenario.separation.r_safe,
-        "lookahead_s": scenario.resolver.lookahead,
-        "margin": scenario.resolver.margin,
-        "dt": dt,
-    }
-    try:
-        params = inspect.signature(factory).parameters
-        takes_any = any(p.kind is p.VAR_KEYWORD for p in params.values())
-    except (TypeError, ValueError):
-        params, takes_any = {}, True
-    extra = dict(scenario.resolver.params)
-    # Most specific first; a factory taking **params may forward to a constructor that
-    # rejects some of them, so retry with fewer.
-    tries = (
-        ("r_safe", "lookahead_s", "margin", "dt"),
-        ("r_safe", "lookahead_s", "margin"),
-        ("r_safe", "lookahead_s"),
-        ("r_safe",),
-        (),
-    )
-    last = None
-    for names in tries:
-        kwargs = {k: offered[k] for k in names if takes_any or k in params}
-        kwargs.update(extra)
-        try:
-            return factory(**kwargs)
-        except TypeError as exc:
-            if "keyword" not in str(exc):
-                raise
-            last = exc
-    raise last
+    """The scenario's resolver (:func:`airspace_sim.avoidance.resolvers.build_resolver`)."""
+    from airspace_sim.avoidance.resolvers import build_resolver as build
 
-
-#: Resolvers whose advice is "no turn, no conflict" exactly when the current heading passes
-#: the CPA test of :func:`airspace_sim.avoidance.bands.cpa_min_ratio` (so the world runs
-#: them only on the ownships that fail it).
-PREFILTERED = ("bands",)
+    return build(scenario)
 
 
 @dataclass
@@ -256,17 +218,9 @@ class Avoidance:
         self.memory_steps = math.ceil(float(spec.side_memory_s) / dt - 1e-9)
         self._clear_for = None  # steps each aircraft has been clear of conflict
         self.dt = float(dt)
-        try:  # resolvers that can judge a heading change as flown get the turn rate
-            rp = inspect.signature(self.resolver.resolve).parameters
-            self._takes_turn_rate = "turn_rate" in rp or any(
-                q.kind is q.VAR_KEYWORD for q in rp.values()
-            )
-            # only resolvers that use them (``bands`` accepts and ignores them)
-            self._takes_modes = "mode_predictions" in rp and getattr(
-                self.resolver, "uses_mode_predictions", False
-            )
-        except (TypeError, ValueError, AttributeError):
-            self._takes_turn_rate = self._takes_modes = False
+        # capabilities the resolver declares (airspace_sim.parts.Resolver)
+        self._takes_turn_rate = self.resolver.uses_turn_rate
+        self._takes_modes = self.resolver.uses_mode_predictions
         horizon = (
             self.lookahead
             if spec.probability_horizon_s is None
@@ -297,7 +251,7 @@ class Avoidance:
         """
         advice = np.zeros(n)
         conflict = np.zeros(n, dtype=bool)
-        if enc.owners.size and self.kind in PREFILTERED:
+        if enc.owners.size and self.resolver.prefilter:
             # bands turn only ownships whose current heading is not clear: find those with
             # the resolver's own CPA test (C = 1) and run the band search on them alone
             vo = velocities[enc.owners]

@@ -147,23 +147,24 @@ class World:
         self.autopilots = []  # (name, members, object)
         names = sorted({a.autopilot for a in self.specs})
         for name in names:
-            factory = registry.get("autopilot", name)
             members = np.array(
                 [i for i, a in enumerate(self.specs) if a.autopilot == name], dtype=np.int64
             )
-            self.autopilots.append(
-                (name, members, factory(members, [self.specs[i] for i in members], ctx))
-            )
+            specs = [self.specs[i] for i in members]
+            ap = registry.build("autopilot", name, members, specs, ctx, params=None)
+            self.autopilots.append((name, members, ap))
         self.modes = np.full(n, -1, dtype=np.int64)
         self._is_markov = np.zeros(n, dtype=bool)
         self._has_plan = np.zeros(n, dtype=bool)
-        for name, members, ap in self.autopilots:
-            if getattr(ap, "modes", None) is not None:
+        for _, members, ap in self.autopilots:
+            if ap.has_modes:
                 self._is_markov[members] = True
                 self.modes[members] = ap.modes
-            self._has_plan[members] = name in ("route", "straight")
+            self._has_plan[members] = ap.has_plan
 
-        self.sensor = registry.get("sensor", sc.sensor.kind)(sc.sensor, self.dt)
+        self.sensor = registry.build(
+            "sensor", sc.sensor.kind, sc.sensor, self.dt, params=sc.sensor.params
+        )
         self.tracker_preset = presets.get(sc.tracker.model, dt=self.dt)
         self.tracks = TrackTable(
             n,
