@@ -106,14 +106,14 @@ def _range(
 ) -> Callable[[Any], str | None]:
     """A number in ``[lo, hi]`` (``(lo, hi]`` with ``lo_open``); ``None`` = unbounded."""
     noun = "integer" if integer else "number"
-    if lo == 0 and lo_open:
+    if (lo == 0 and lo_open) or (integer and lo == 1):
         what = f"a positive {noun}"
     elif lo == 0:
         what = f"a non-negative {noun}"
     elif lo is not None:
-        what = f"a {noun} {'>' if lo_open else '≥'} {lo:g}"
+        what = f"{'an' if integer else 'a'} {noun} {'>' if lo_open else '≥'} {lo:g}"
     else:
-        what = f"a {noun}"
+        what = f"an {noun}" if integer else f"a {noun}"
     if hi is not None:
         what += f" up to {hi:g}"
     if unit:
@@ -386,7 +386,8 @@ def build_dataclass(cls, table: Any, path: str = ""):
             hint = f"did you mean {near[0]!r}? " if near else ""
             raise Invalid(
                 _join(path, str(key)),
-                f"unknown key, got {_show(table[key])} ({hint}known: {', '.join(fields)})",
+                f"unknown key, got {_show(table[key])} "
+                f"({hint}known: {', '.join(fields) if fields else 'none, it takes no keys'})",
             )
     kwargs = {}
     for name, f in fields.items():
