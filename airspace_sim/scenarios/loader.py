@@ -3,8 +3,15 @@
 The checks are derived from the dataclasses in :mod:`.schema`: every field's type comes from
 its annotation (``float``, ``int``, ``str``, ``bool``, ``dict``, ``tuple[float, float]``,
 ``list[X]``, ``X | None`` and nested dataclasses), and :data:`RANGES` adds what a type cannot
-say (positive time step, probabilities in [0, 1], names that must exist). A new schema field
-is validated with no change here as long as its type is one of those.
+say (positive time step, probabilities in [0, 1], physically meaningful bounds, names that
+must exist); :func:`check_scenario` adds the rules between fields. A new schema field is
+validated with no change here as long as its type is one of those.
+
+The parts' own parameters (``resolver.params``, ``sensor.params``, ``tracker.params``) are
+validated the same way against the part's ``Params`` dataclass, whose fields declare their
+ranges (:func:`airspace_sim.parts.param`; :func:`check_parts`, :func:`validate_params`).
+This is the one validation pass: the world and its parts trust the resulting
+:class:`Scenario` and check nothing again.
 
 Every problem becomes one :class:`~airspace_sim.errors.UserError` line naming the file, the
 dotted key and the value::
