@@ -19,6 +19,7 @@ from __future__ import annotations
 import dataclasses
 import inspect
 import sys
+import typing
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import ClassVar
@@ -312,6 +313,24 @@ def _accepts(func, n_positional: int, keywords=()) -> str | None:
     return None
 
 
+def _check_params_types(params: type, where: str) -> None:
+    """Every ``Params`` field has a type the scenario loader can validate."""
+    from airspace_sim.scenarios.loader import describe
+
+    try:
+        hints = typing.get_type_hints(params)
+    except Exception as exc:  # noqa: BLE001 - an annotation that does not resolve
+        raise UserError(f"{where}: Params annotations do not resolve: {exc}") from None
+    for f in dataclasses.fields(params):
+        try:
+            describe(hints[f.name])
+        except TypeError:
+            raise UserError(
+                f"{where}: Params.{f.name}: type {hints[f.name]!r} cannot be read from a "
+                f"scenario (use float, int, bool, str, X | None, tuple or list of those)"
+            ) from None
+
+
 def origin(obj) -> str:
     """Where a part comes from, for messages: ``module.Class`` and its file when known."""
     module = getattr(obj, "__module__", None) or "?"
@@ -358,6 +377,7 @@ def check(kind: str, cls, name: str) -> None:
     params = getattr(cls, "Params", NoParams)
     if not (inspect.isclass(params) and dataclasses.is_dataclass(params)):
         raise UserError(f"{where}: Params must be a dataclass, got {params!r}")
+    _check_params_types(params, where)
     for flag, value in vars(base).items():
         if isinstance(value, bool) and not isinstance(getattr(cls, flag, value), bool):
             raise UserError(f"{where}: {flag} must be True or False, got {getattr(cls, flag)!r}")

@@ -304,3 +304,29 @@ def test_registration_checks_constructor_and_keywords():
 
     with pytest.raises(UserError, match=r"constructor must take \(spec, dt, params\)"):
         check("sensor", Sensorish, "s")
+
+
+def test_a_plugin_calling_sys_exit_is_one_line(tmp_path):
+    folder = tmp_path / "mine"
+    folder.mkdir()
+    (folder / "quitter.py").write_text("import sys\nsys.exit(3)\n")
+    proc = _cli([*HEAD_ON, "--steps", "1"], cwd=tmp_path, AIRSPACE_SIM_PLUGINS=str(folder))
+    line = _one_line_error(proc)
+    assert "quitter.py: failed to load: SystemExit: 3" in line
+
+
+def test_params_of_an_unreadable_type_are_refused_at_registration():
+    from dataclasses import dataclass, field
+
+    from airspace_sim.parts import Resolver, check
+
+    class Arrays(Resolver):
+        @dataclass(frozen=True)
+        class Params:
+            gains: np.ndarray = field(default_factory=lambda: np.zeros(2))
+
+        def resolve(self, *a, mode_predictions=None, turn_rate=None):
+            return None
+
+    with pytest.raises(UserError, match=r"Params\.gains: type .* cannot be read from a scenario"):
+        check("resolver", Arrays, "arrays")
