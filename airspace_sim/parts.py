@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import sys
+import typing
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import ClassVar
@@ -30,6 +32,60 @@ from airspace_sim.errors import UserError
 @dataclass(frozen=True)
 class NoParams:
     """A part without parameters."""
+
+
+def param(
+    default=dataclasses.MISSING,
+    *,
+    unit: str = "",
+    doc: str = "",
+    ge: float | None = None,
+    gt: float | None = None,
+    le: float | None = None,
+    lt: float | None = None,
+    choices: tuple | None = None,
+):
+    """A ``Params`` field with its unit, meaning and valid range, read by the loader.
+
+    ``ge``/``gt``/``le``/``lt`` bound a number (≥, >, ≤, <), ``choices`` lists the allowed
+    values; the field's annotation gives its type (``float``, ``int``, ``bool``, ``str``,
+    ``X | None``). Example: ``lookahead_s: float = param(120.0, unit="s", gt=0, le=3600)``.
+    """
+    meta = {"unit": unit, "doc": doc, "ge": ge, "gt": gt, "le": le, "lt": lt, "choices": choices}
+    return dataclasses.field(
+        default=default, metadata={k: v for k, v in meta.items() if v not in (None, "")}
+    )
+
+
+def describe_range(meta) -> str | None:
+    """The range of a :func:`param` field's ``metadata`` as text, e.g. ``"in (0, 180] deg"``;
+    None without bounds."""
+    unit = f" {meta['unit']}" if meta.get("unit") else ""
+    if meta.get("choices") is not None:
+        return "one of " + ", ".join(map(str, meta["choices"]))
+    lo = ("[", meta["ge"]) if "ge" in meta else ("(", meta["gt"]) if "gt" in meta else None
+    hi = ("]", meta["le"]) if "le" in meta else (")", meta["lt"]) if "lt" in meta else None
+    if lo and hi:
+        return f"in {lo[0]}{lo[1]:g}, {hi[1]:g}{hi[0]}{unit}"
+    if lo:
+        return f"{'≥' if lo[0] == '[' else '>'} {lo[1]:g}{unit}"
+    if hi:
+        return f"{'≤' if hi[0] == ']' else '<'} {hi[1]:g}{unit}"
+    return None
+
+
+def in_range(meta, value) -> bool:
+    """Does ``value`` satisfy the bounds and choices of a :func:`param` field's metadata?"""
+    if meta.get("choices") is not None and value not in meta["choices"]:
+        return False
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return True
+    return (
+        ("ge" not in meta or value >= meta["ge"])
+        and ("gt" not in meta or value > meta["gt"])
+        and ("le" not in meta or value <= meta["le"])
+        and ("lt" not in meta or value < meta["lt"])
+    )
 
 
 class Autopilot(ABC):
@@ -169,7 +225,8 @@ class Tracker(ABC):
 class Resolver(ABC):
     """Conflict detection and resolution for many ownships at once (paper §V).
 
-    Constructed as ``cls(params)`` with a ``Params`` instance. The loader fills the
+    Constructed as ``cls(params)`` with a ``Params`` instance (this base's ``__init__``
+    stores it as ``self.params``; ``cls()`` uses the defaults). The loader fills the
     ``Params`` fields named ``r_safe`` (m, from ``separation.r_safe``), ``lookahead_s`` (s,
     ``resolver.lookahead``), ``margin`` (``resolver.margin``) and ``dt`` (s, the world
     step) from the scenario when the dataclass declares them, then ``resolver.params`` on
@@ -190,6 +247,9 @@ class Resolver(ABC):
     reports_band: ClassVar[bool] = False
 
     params: object
+
+    def __init__(self, params=None):
+        self.params = self.Params() if params is None else params
 
     @abstractmethod
     def resolve(
@@ -227,16 +287,68 @@ def _abstract_names(base: type) -> list[str]:
     return sorted(base.__abstractmethods__)
 
 
+#: How each kind is constructed: the number of positional arguments of ``cls(...)``.
+CONSTRUCTOR_ARGS = {
+    "autopilot": ("members", "specs", "context", "params"),
+    "sensor": ("spec", "dt", "params"),
+    "tracker": ("preset", "sigma", "params"),
+    "resolver": ("params",),
+}
+
+#: Keyword arguments a method of the kind must accept (the world passes them by name).
+KEYWORDS = {"resolver": {"resolve": ("mode_predictions", "turn_rate")}}
+
+
+def _accepts(func, n_positional: int, keywords=()) -> str | None:
+    """None if ``func`` can be called with ``n_positional`` arguments and ``keywords``,
+    else what is wrong (one phrase)."""
+    try:
+        sig = inspect.signature(func)
+    except (TypeError, ValueError):
+        return None  # builtins without a signature: nothing to check
+    try:
+        sig.bind(*range(n_positional), **{k: None for k in keywords})
+    except TypeError as exc:
+        return str(exc)
+    return None
+
+
+def _check_params_types(params: type, where: str) -> None:
+    """Every ``Params`` field has a type the scenario loader can validate."""
+    from airspace_sim.scenarios.loader import describe
+
+    try:
+        hints = typing.get_type_hints(params)
+    except Exception as exc:  # noqa: BLE001 - an annotation that does not resolve
+        raise UserError(f"{where}: Params annotations do not resolve: {exc}") from None
+    for f in dataclasses.fields(params):
+        try:
+            describe(hints[f.name])
+        except TypeError:
+            raise UserError(
+                f"{where}: Params.{f.name}: type {hints[f.name]!r} cannot be read from a "
+                f"scenario (use float, int, bool, str, X | None, tuple or list of those)"
+            ) from None
+
+
+def origin(obj) -> str:
+    """Where a part comes from, for messages: ``module.Class`` and its file when known."""
+    module = getattr(obj, "__module__", None) or "?"
+    text = f"{module}.{getattr(obj, '__qualname__', type(obj).__name__)}"
+    path = getattr(sys.modules.get(module), "__file__", None)
+    return f"{text} in {path}" if path else text
+
+
 def check(kind: str, cls, name: str) -> None:
     """Raise a one-line :class:`UserError` unless ``cls`` fits the protocol of ``kind``.
 
-    Checks that it is a class, has every method and property of the protocol, that
-    ``Params`` is a dataclass and that the capability flags are booleans.
+    Checks that it is a class, has every method and property of the protocol, that its
+    constructor takes the kind's arguments (:data:`CONSTRUCTOR_ARGS`) and its methods the
+    keywords the world passes (:data:`KEYWORDS`), that ``Params`` is a dataclass and that the
+    capability flags are booleans. Done once, at registration, never at run time.
     """
     base = KINDS[kind]
-    where = (
-        f"{kind} {name!r} ({getattr(cls, '__module__', '?')}.{getattr(cls, '__qualname__', cls)})"
-    )
+    where = f"{kind} {name!r} ({origin(cls)})"
     if not inspect.isclass(cls):
         raise UserError(f"{where}: a part must be a class, got {type(cls).__name__}")
     missing = []
@@ -248,9 +360,24 @@ def check(kind: str, cls, name: str) -> None:
         raise UserError(
             f"{where}: does not fit the {base.__name__} protocol: missing {', '.join(missing)}"
         )
+    args = CONSTRUCTOR_ARGS[kind]
+    problem = _accepts(cls, len(args))
+    if problem:
+        raise UserError(
+            f"{where}: does not fit the {base.__name__} protocol: the constructor must take "
+            f"({', '.join(args)}): {problem}"
+        )
+    for method, keywords in KEYWORDS.get(kind, {}).items():
+        problem = _accepts(getattr(cls, method), 6 if method == "resolve" else 0, keywords)
+        if problem:
+            raise UserError(
+                f"{where}: does not fit the {base.__name__} protocol: {method}() must accept "
+                f"the keyword arguments {', '.join(keywords)}: {problem}"
+            )
     params = getattr(cls, "Params", NoParams)
     if not (inspect.isclass(params) and dataclasses.is_dataclass(params)):
         raise UserError(f"{where}: Params must be a dataclass, got {params!r}")
+    _check_params_types(params, where)
     for flag, value in vars(base).items():
         if isinstance(value, bool) and not isinstance(getattr(cls, flag, value), bool):
             raise UserError(f"{where}: {flag} must be True or False, got {getattr(cls, flag)!r}")

@@ -8,14 +8,18 @@ third party would ship them, by :func:`load_plugins`:
 - a plugins folder: every ``*.py`` file in the folders listed in the environment variable
   ``AIRSPACE_SIM_PLUGINS`` (``os.pathsep``-separated) and in ``./plugins`` is imported.
 
-The registry is per process but holds only factories, never simulation state, so several
-worlds in one process do not interfere.
+Every part is a class fitting its protocol in :mod:`airspace_sim.parts`, checked when it is
+registered; parts are constructed only by :func:`build`. The registry is per process but
+holds only classes, never simulation state, so several worlds in one process do not
+interfere. A plugin that fails to import or to register is one :class:`UserError` line
+naming it.
 """
 
 from __future__ import annotations
 
 import importlib.metadata
 import importlib.util
+import inspect
 import os
 import sys
 from collections.abc import Callable
@@ -26,20 +30,52 @@ from airspace_sim.errors import UserError
 KINDS = ("autopilot", "sensor", "tracker", "resolver")
 ENTRY_POINT_GROUP = "airspace_sim.plugins"
 
-_REGISTRY: dict[str, dict[str, Callable]] = {kind: {} for kind in KINDS}
+_REGISTRY: dict[str, dict[str, type]] = {kind: {} for kind in KINDS}
 _loaded_plugins = False
 
+#: Kinds whose built-ins may still be plain factory functions (not checked, no ``Params``).
+#: Transitional: the tracker slot-table classes replace them; then this becomes empty.
+FACTORY_FUNCTIONS_ALLOWED = ("tracker",)
 
-def register(kind: str, name: str) -> Callable[[Callable], Callable]:
-    """Decorator: register ``factory`` as the part ``name`` of ``kind``."""
+
+def register(kind: str, name: str, *, replace: bool = False) -> Callable[[type], type]:
+    """Class decorator: register ``cls`` as the part ``name`` of ``kind``.
+
+    The class is checked against its protocol (:func:`airspace_sim.parts.check`) now, and
+    refused with a one-line :class:`UserError` naming it (name, module, file) and what is
+    missing if it does not fit, or if ``name`` is already registered (built-in or plugin)
+    and ``replace`` is not True. Registering the very same class again is a no-op (a module
+    imported twice).
+    """
+    from airspace_sim import parts
+
     if kind not in _REGISTRY:
         raise ValueError(f"unknown part kind {kind!r}; kinds are {', '.join(KINDS)}")
 
-    def deco(factory: Callable) -> Callable:
-        _REGISTRY[kind][name] = factory
-        return factory
+    def deco(cls: type) -> type:
+        if kind in FACTORY_FUNCTIONS_ALLOWED and not inspect.isclass(cls) and callable(cls):
+            pass  # transitional factory function (see FACTORY_FUNCTIONS_ALLOWED)
+        else:
+            parts.check(kind, cls, name)
+        old = _REGISTRY[kind].get(name)
+        if old is not None and old is not cls and not _same(old, cls) and not replace:
+            raise UserError(
+                f"{kind} {name!r} ({parts.origin(cls)}): would replace the registered "
+                f"{kind} {name!r} ({parts.origin(old)}); register it under another name or "
+                f"with register({kind!r}, {name!r}, replace=True)"
+            )
+        _REGISTRY[kind][name] = cls
+        return cls
 
     return deco
+
+
+def _same(a, b) -> bool:
+    """The same class defined twice by re-running its module (same module and name)."""
+    return (getattr(a, "__module__", None), getattr(a, "__qualname__", None)) == (
+        getattr(b, "__module__", None),
+        getattr(b, "__qualname__", None),
+    )
 
 
 def names(kind: str) -> list[str]:
@@ -48,14 +84,40 @@ def names(kind: str) -> list[str]:
     return sorted(_REGISTRY[kind])
 
 
-def get(kind: str, name: str) -> Callable:
-    """The factory registered as ``name`` of ``kind``; a :class:`UserError` if unknown."""
+def get(kind: str, name: str) -> type:
+    """The class registered as ``name`` of ``kind``; a :class:`UserError` if unknown."""
     _ensure_loaded()
     try:
         return _REGISTRY[kind][name]
     except KeyError:
         known = ", ".join(sorted(_REGISTRY[kind])) or "none"
         raise UserError(f"unknown {kind} {name!r} (known: {known})") from None
+
+
+def params_class(kind: str, name: str) -> type:
+    """The ``Params`` dataclass of part ``name`` of ``kind`` (``NoParams`` if it has none)."""
+    from airspace_sim.parts import NoParams
+
+    return getattr(get(kind, name), "Params", NoParams)
+
+
+def build(kind: str, name: str, *args, params=None):
+    """Construct part ``name`` of ``kind``: ``cls(*args, params)``, the one way parts are made.
+
+    ``params`` is a ready ``Params`` instance, a dict already validated against it
+    (:func:`airspace_sim.scenarios.loader.validate_params`; turned into ``Params(**dict)``
+    with no further checks) or None (the defaults). ``args`` are the kind's other
+    constructor arguments (:data:`airspace_sim.parts.CONSTRUCTOR_ARGS`).
+    """
+    cls = get(kind, name)
+    if not inspect.isclass(cls):  # transitional factory function (FACTORY_FUNCTIONS_ALLOWED)
+        return cls(*args, **(params or {}))
+    Params = params_class(kind, name)
+    if params is None:
+        params = Params()
+    elif isinstance(params, dict):
+        params = Params(**params)
+    return cls(*args, params)
 
 
 def _ensure_loaded() -> None:
@@ -92,9 +154,11 @@ def load_plugins() -> list[str]:
     for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
         try:
             obj = ep.load()
-            if callable(obj):
+            if callable(obj) and not inspect.isclass(obj):
                 obj()
-        except Exception as exc:
+        except UserError:
+            raise  # a part refused at registration: the message names it and its file
+        except (Exception, SystemExit) as exc:
             dist = getattr(getattr(ep, "dist", None), "name", None)
             where = f"entry point {ep.name} = {ep.value}" + (
                 f" (distribution {dist})" if dist else ""
@@ -118,7 +182,10 @@ def load_plugins() -> list[str]:
             sys.modules[mod_name] = module
             try:
                 spec.loader.exec_module(module)
-            except Exception as exc:
+            except UserError:
+                del sys.modules[mod_name]
+                raise  # a part refused at registration: the message names it and its file
+            except (Exception, SystemExit) as exc:
                 del sys.modules[mod_name]
                 raise UserError(f"plugin {path}: failed to load: {_one_line(exc)}") from exc
             loaded.append(str(path))

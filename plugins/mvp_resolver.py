@@ -19,35 +19,38 @@ it is already closer than ``r_safe`` and still closing. Use with ``[resolver] ki
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from airspace_sim.avoidance.resolvers import ResolverOutput
+from airspace_sim.geometry import wrap_angle
+from airspace_sim.parts import Resolver, param
 from airspace_sim.registry import register
 
 
-class MVPResolver:
+@register("resolver", "mvp")
+class MVPResolver(Resolver):
     """Heading-only Modified Voltage Potential over all intruders (see the module docstring).
 
-    Parameters: ``r_safe`` (m), ``lookahead_s`` (s), ``margin`` (fraction of r_safe),
-    ``min_time`` (s, floor of the CPA time in the push, avoids dividing by ~0; default 1 s).
+    Constructed as ``MVPResolver(MVPResolver.Params(...))``; the loader fills ``r_safe``,
+    ``lookahead_s`` and ``margin`` from the scenario.
     """
 
-    prefilter = uses_mode_predictions = uses_turn_rate = reports_band = False
-
-    def __init__(
-        self,
-        r_safe: float = 3000.0,
-        lookahead_s: float = 120.0,
-        margin: float = 0.1,
-        min_time: float = 1.0,
-    ):
-        self.r_safe, self.lookahead_s = float(r_safe), float(lookahead_s)
-        self.margin, self.min_time = float(margin), float(min_time)
+    @dataclass(frozen=True)
+    class Params:
+        r_safe: float = param(3000.0, unit="m", doc="safety radius", gt=0, le=1e6)
+        lookahead_s: float = param(120.0, unit="s", doc="conflict look-ahead", gt=0, le=3600)
+        margin: float = param(0.1, doc="extra fraction of r_safe kept clear", ge=0, le=10)
+        min_time: float = param(
+            1.0, unit="s", doc="floor of the CPA time in the push (no division by ~0)", gt=0
+        )
 
     def pair_conflicts(self, rel_position, rel_velocity, valid):
         """CPA time (N, K), displacement (N, K, 2) and conflict flags (N, K)."""
         r = np.asarray(rel_position, dtype=float)
         v = np.asarray(rel_velocity, dtype=float)
+        p = self.params
         vv = np.einsum("...i,...i->...", v, v)
         rv = np.einsum("...i,...i->...", r, v)
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -55,12 +58,10 @@ class MVPResolver:
         d = r + v * t[..., None]
         dist_cpa = np.hypot(d[..., 0], d[..., 1])
         dist_now = np.hypot(r[..., 0], r[..., 1])
-        r_clear = self.r_safe * (1.0 + self.margin)
+        r_clear = p.r_safe * (1.0 + p.margin)
         closing = t > 0
         conflict = (
-            valid
-            & closing
-            & (((t < self.lookahead_s) & (dist_cpa < r_clear)) | (dist_now < self.r_safe))
+            valid & closing & (((t < p.lookahead_s) & (dist_cpa < r_clear)) | (dist_now < p.r_safe))
         )
         return t, d, conflict
 
@@ -71,8 +72,8 @@ class MVPResolver:
         rel_velocity,
         valid,
         max_heading_change,
+        *,
         mode_predictions=None,
-        rel_covariance=None,
         turn_rate=None,
     ):
         vo = np.asarray(own_velocity, dtype=float).reshape(-1, 2)
@@ -88,15 +89,13 @@ class MVPResolver:
         r_hat = r / np.maximum(np.hypot(r[..., 0], r[..., 1]), 1e-9)[..., None]
         left = np.stack([-r_hat[..., 1], r_hat[..., 0]], axis=-1)
         d_hat = np.where((dist > 1.0)[..., None], d / np.maximum(dist, 1e-9)[..., None], left)
-        intrusion = np.maximum(self.r_safe * (1.0 + self.margin) - dist, 0.0)
-        push = -(intrusion / np.maximum(t, self.min_time))[..., None] * d_hat
+        p = self.params
+        intrusion = np.maximum(p.r_safe * (1.0 + p.margin) - dist, 0.0)
+        push = -(intrusion / np.maximum(t, p.min_time))[..., None] * d_hat
         dv = np.where(pair[..., None], push, 0.0).sum(axis=1)
         new_v = vo + dv
         heading_change = np.arctan2(new_v[:, 1], new_v[:, 0]) - np.arctan2(vo[:, 1], vo[:, 0])
-        heading_change = (heading_change + np.pi) % (2 * np.pi) - np.pi
+        heading_change = wrap_angle(heading_change)
         conflict = pair.any(axis=1)
         heading_change = np.where(conflict, np.clip(heading_change, -mx, mx), 0.0)
         return ResolverOutput(heading_change, conflict)
-
-
-register("resolver", "mvp")(MVPResolver)

@@ -216,7 +216,7 @@ def test_probabilistic_bands_threats_unchanged_by_the_bound():
     mu = rng.dirichlet(np.ones(M), size=(N, K))
     valid = rng.random((N, K)) < 0.9
     vo = np.tile([230.0, 0.0], (N, 1))
-    res = ProbabilisticBandsResolver(threshold=0.05)
+    res = ProbabilisticBandsResolver(ProbabilisticBandsResolver.Params(threshold=0.05))
     out = res.resolve(
         vo, r, v - vo[:, None], valid, np.radians(90.0), mode_predictions=(xs, Ps, mu)
     )

@@ -165,6 +165,8 @@ def _load_plugin_module():
     spec = importlib.util.spec_from_file_location("kalman_tracker_under_test", PLUGIN)
     module = importlib.util.module_from_spec(spec)
     saved = {kind: dict(parts) for kind, parts in registry._REGISTRY.items()}
+    registry._REGISTRY["tracker"].pop("kalman", None)  # this copy may not replace it
+    sys.modules[spec.name] = module
     try:
         spec.loader.exec_module(module)
     finally:  # do not leave this copy registered
@@ -271,11 +273,14 @@ def test_kalman_tracker_in_a_world(clean_registry):
 
 
 def _load_mvp():
+    """The plugin module imported under another name, leaving the registry as it was."""
     spec = importlib.util.spec_from_file_location(
         "mvp_resolver_under_test", REPO / "plugins" / "mvp_resolver.py"
     )
     module = importlib.util.module_from_spec(spec)
     saved = {kind: dict(parts) for kind, parts in registry._REGISTRY.items()}
+    registry._REGISTRY["resolver"].pop("mvp", None)
+    sys.modules[spec.name] = module  # dataclasses look their module up while being built
     try:
         spec.loader.exec_module(module)
     finally:
@@ -285,8 +290,13 @@ def _load_mvp():
     return module
 
 
+def _mvp(**params):
+    cls = _load_mvp().MVPResolver
+    return cls(cls.Params(**params))
+
+
 def test_mvp_head_on_both_turn_right_and_clip():
-    mvp = _load_mvp().MVPResolver(r_safe=3000.0, lookahead_s=120.0, margin=0.1)
+    mvp = _mvp(r_safe=3000.0, lookahead_s=120.0, margin=0.1)
     # two ownships: A at the origin flying east, B 20 km east flying west
     own_v = np.array([[230.0, 0.0], [-230.0, 0.0]])
     rel_p = np.array([[[20000.0, 0.0]], [[-20000.0, 0.0]]])
@@ -299,8 +309,7 @@ def test_mvp_head_on_both_turn_right_and_clip():
 
 
 def test_mvp_push_reaches_the_clear_distance():
-    mod = _load_mvp()
-    mvp = mod.MVPResolver(r_safe=3000.0, lookahead_s=300.0, margin=0.0)
+    mvp = _mvp(r_safe=3000.0, lookahead_s=300.0, margin=0.0)
     # intruder crossing ahead from the right, CPA 1 km in front after ~60 s
     own_v = np.array([[200.0, 0.0]])
     rel_p = np.array([[[13000.0, -12000.0]]])
@@ -317,7 +326,7 @@ def test_mvp_push_reaches_the_clear_distance():
 
 
 def test_mvp_no_conflict_no_turn():
-    mvp = _load_mvp().MVPResolver(r_safe=3000.0, lookahead_s=120.0)
+    mvp = _mvp(r_safe=3000.0, lookahead_s=120.0)
     own_v = np.array([[230.0, 0.0], [230.0, 0.0], [230.0, 0.0]])
     rel_p = np.array([[[20000.0, 10000.0]], [[-5000.0, 0.0]], [[20000.0, 0.0]]])
     rel_v = np.array(

@@ -7,12 +7,15 @@ from airspace_sim import registry
 from airspace_sim.avoidance import band_search, escape_angle, tangent_heading_change
 from airspace_sim.avoidance.resolvers import DEFAULT_R_SAFE, ResolverOutput
 from airspace_sim.errors import UserError
+from airspace_sim.scenarios.loader import validate_params
 
 R = DEFAULT_R_SAFE
 
 
 def make(name, **params):
-    return registry.get("resolver", name)(**params)
+    """The resolver ``name`` with ``params`` validated against its ``Params``."""
+    Params = registry.params_class("resolver", name)
+    return registry.build("resolver", name, params=validate_params(Params, params, name))
 
 
 def scene():

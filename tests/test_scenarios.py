@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 import typing
 
 import numpy as np
@@ -242,13 +243,13 @@ def test_overrides_apply_before_validation():
             "traffic.count=64",
             "traffic.radius=70000",
             "sensor.kind=radar",
-            "resolver.params.gain=2.5",
+            "resolver.params.left_penalty=0.1",
             "duration=10",
         ],
     )
     assert sc.traffic.count == 64 and sc.traffic.radius == 70000.0
     assert isinstance(sc.traffic.radius, float)
-    assert sc.resolver.params == {"gain": 2.5}
+    assert sc.resolver.params == {"left_penalty": 0.1}
     assert sc.duration == 10.0
     assert len(build_aircraft(sc, np.random.default_rng(0))) == 64
     # the file itself is untouched
@@ -264,8 +265,14 @@ def test_override_list_index_and_list_value():
 @pytest.mark.parametrize(
     "override, start",
     [
-        ("traffic.count=abc", "--set traffic.count: expected a non-negative integer, got 'abc'"),
-        ("traffic.count=-3", "--set traffic.count: expected a non-negative integer, got -3"),
+        (
+            "traffic.count=abc",
+            "--set traffic.count: expected a non-negative integer up to 10000, got 'abc'",
+        ),
+        (
+            "traffic.count=-3",
+            "--set traffic.count: expected a non-negative integer up to 10000, got -3",
+        ),
         ("traffic.cout=3", "--set traffic.cout: unknown key"),
         ("trafic.count=3", "--set trafic: unknown key"),
         (
@@ -276,7 +283,10 @@ def test_override_list_index_and_list_value():
         ("dt.x=3", "--set dt.x: dt is not a table"),
         ("traffic.count", "--set traffic.count: expected key=value"),
         ("traffic..count=3", "--set traffic..count: malformed key"),
-        ("separation={r_safe = -1}", "--set separation.r_safe: expected a positive number, got -1"),
+        (
+            "separation={r_safe = -1}",
+            "--set separation.r_safe: expected a positive number up to 1e+06 (m), got -1",
+        ),
     ],
 )
 def test_bad_override_is_reported_as_set(override, start):
@@ -388,15 +398,15 @@ def test_random_traffic_too_dense_is_a_user_error():
 
 def test_generated_id_clash_is_a_user_error():
     hand = {"id": "ring00", "position": [0.0, 0.0], "heading_deg": 0.0, "speed": 200.0}
-    sc = from_dict(
-        {
-            "name": "x",
-            "aircraft": [hand],
-            "traffic": {"pattern": "ring", "count": 4, "radius": 20000.0},
-        }
-    )
-    with pytest.raises(UserError, match="ring00"):
-        build_aircraft(sc, 0)
+    # refused by the loader, before any traffic is generated
+    with pytest.raises(UserError, match=r"aircraft\[0\]\.id: .*generated ring.*'ring00'"):
+        from_dict(
+            {
+                "name": "x",
+                "aircraft": [hand],
+                "traffic": {"pattern": "ring", "count": 4, "radius": 20000.0},
+            }
+        )
 
 
 def test_build_does_not_share_hand_placed_objects():
@@ -451,3 +461,179 @@ def test_random_traffic_spawn_clear_s_impossible_is_a_user_error():
     )
     with pytest.raises(UserError, match=r"traffic\.spawn_clear_s.*600"):
         build_aircraft(sc, np.random.default_rng(0))
+
+
+# --------------------------------------------------------------------------- one validation pass
+
+TWO = [
+    {"id": "a", "position": [0.0, 0.0], "heading_deg": 0.0, "speed": 200.0},
+    {"id": "b", "position": [9000.0, 0.0], "heading_deg": 180.0, "speed": 200.0},
+]
+
+
+def _with(path: str, value):
+    """A valid two-aircraft scenario table with ``path`` (dotted, ``aircraft[i].x``) set."""
+    import copy
+
+    data = {"name": "v", "aircraft": copy.deepcopy(TWO)}
+    *head, last = path.replace("]", "").replace("[", ".").split(".")
+    node = data
+    for key in head:
+        node = node[int(key)] if key.isdigit() else node.setdefault(key, {})
+    node[last] = value
+    return data
+
+
+@pytest.mark.parametrize(
+    "path,value,expected",
+    [
+        ("dt", math.nan, "dt: expected a positive number up to 60 (s), got nan"),
+        ("dt", math.inf, "dt: expected a positive number up to 60 (s), got inf"),
+        ("dt", 0.0, "dt: expected a positive number up to 60 (s), got 0.0"),
+        ("dt", 5e-324, "duration: expected at most 10000000 steps"),
+        ("aircraft[1].id", "a", "aircraft[1].id: duplicate aircraft id, got 'a'"),
+        (
+            "aircraft[0].position",
+            [math.inf, 0.0],
+            "aircraft[0].position[0]: expected a finite number, got inf",
+        ),
+        ("aircraft[0].position", [1e200, 0.0], "aircraft[0].position: expected coordinates"),
+        ("aircraft[0].speed", -1.0, "aircraft[0].speed: expected a positive number"),
+        ("aircraft[0].speed", 1e308, "aircraft[0].speed: expected a positive number up to 1000"),
+        ("aircraft[0].max_turn_rate_deg", -1.0, "max_turn_rate_deg: expected a non-negative"),
+        ("sensor.sigma", -1.0, "sensor.sigma: expected a non-negative number up to 100000 (m)"),
+        ("sensor.sigma", 1e308, "sensor.sigma: expected a non-negative number"),
+        ("sensor.detection_probability", 1.5, "expected a probability in [0, 1], got 1.5"),
+        ("sensor.period", 0.0, "sensor.period: expected a positive number"),
+        ("sensor.period", 1.5, "sensor.period: expected a whole multiple of dt (1 s), got 1.5"),
+        ("sensor.params.gain", 2.0, "sensor.params.gain: unknown key, got 2.0 (known: none"),
+        ("tracker.params.q", 2.0, "tracker.params.q: unknown key"),
+        ("resolver.turn_preference", "left", "expected one of right, nearest, none, got 'left'"),
+        (
+            "resolver.search_deg",
+            0.0,
+            "resolver.search_deg: expected a number of degrees in (0, 180]",
+        ),
+        ("resolver.search_deg", 181.0, "resolver.search_deg: expected a number of degrees"),
+        ("resolver.confirm_s", -1.0, "resolver.confirm_s: expected a non-negative number"),
+        ("resolver.side_memory_s", -1.0, "resolver.side_memory_s: expected a non-negative"),
+        ("resolver.resume_decay_s", 0.0, "resolver.resume_decay_s: expected a positive number"),
+        ("resolver.probability_samples", 0, "probability_samples: expected a positive integer"),
+        ("resolver.probability_samples", 2**63 - 1, "expected a positive integer up to 1000"),
+        ("resolver.lookahead", 1e308, "resolver.lookahead: expected a positive number up to 3600"),
+        ("resolver.params.bogus", 1, "resolver.params.bogus: unknown key, got 1 (known: r_safe,"),
+        ("resolver.params.left_penalty", "x", "resolver.params.left_penalty: expected a number"),
+        ("resolver.params.resolution", -1.0, "resolver.params.resolution: expected a number in"),
+        ("traffic.count", 10**9, "traffic.count: expected a non-negative integer up to 10000"),
+        ("traffic.sector", 1e308, "traffic.sector: expected a positive number up to"),
+    ],
+)
+def test_every_rule_is_one_line_naming_key_and_value(path, value, expected):
+    with pytest.raises(UserError) as info:
+        from_dict(_with(path, value), source="v.toml")
+    msg = str(info.value)
+    assert "\n" not in msg
+    assert msg.startswith("v.toml: ") and expected in msg, msg
+
+
+@pytest.mark.parametrize(
+    "kind,params,expected",
+    [
+        ("bands-probabilistic", {"threshold": "x"}, "threshold: expected a number in (0, 1]"),
+        (
+            "bands-probabilistic",
+            {"threshold": math.nan},
+            "threshold: expected a number in (0, 1], got nan",
+        ),
+        ("bands-probabilistic", {"threshold": -5}, "threshold: expected a number in (0, 1]"),
+        ("seed", {"horizon": 0}, "resolver.params.horizon: expected an integer in [1, 1000]"),
+        ("seed", {"horizon": 2.5}, "resolver.params.horizon: expected an integer in [1, 1000]"),
+        ("none", {"margin": -1.0}, "resolver.params.margin: expected a number in [0, 10]"),
+    ],
+)
+def test_resolver_params_follow_the_resolvers_params(kind, params, expected):
+    data = _with("resolver.kind", kind)
+    data["resolver"]["params"] = params
+    with pytest.raises(UserError, match=re.escape(expected)):
+        from_dict(data, source="v.toml")
+
+
+def test_resolver_params_filled_from_the_scenario_and_overridden():
+    from airspace_sim.avoidance.resolvers import SeedResolver, build_resolver
+
+    data = _with("resolver.kind", "seed")
+    data["dt"] = 0.5
+    data["separation"] = {"r_safe": 2000.0}
+    data["resolver"]["params"] = {"horizon": 4}
+    sc = from_dict(data)
+    res = build_resolver(sc)
+    assert isinstance(res, SeedResolver)
+    assert res.params == SeedResolver.Params(r_safe=2000.0, dt=0.5, horizon=4)
+    assert sc.resolver.params == {"horizon": 4}  # only what the user set, converted
+    # an override wins over the scenario value; ints become the declared float
+    data["resolver"]["params"] = {"r_safe": 1500}
+    res = build_resolver(from_dict(data))
+    assert res.params.r_safe == 1500.0 and isinstance(res.params.r_safe, float)
+    # a scenario value outside the resolver's own range names the scenario key
+    data = _with("resolver.kind", "seed")
+    data["dt"] = 59.0
+    data["duration"] = 600.0
+    data["sensor"] = {"period": 59.0}
+    sc = from_dict(data)  # 59 s fits the seed resolver's dt range (0, 60]
+    assert build_resolver(sc).params.dt == 59.0
+
+
+def test_a_scenario_value_outside_a_params_range_names_the_scenario_key():
+    from airspace_sim import parts
+
+    @dataclasses.dataclass(frozen=True)
+    class Params:
+        lookahead_s: float = parts.param(60.0, unit="s", gt=0, le=600)
+
+    filled = {"lookahead_s": "resolver.lookahead"}
+    with pytest.raises(loader.Invalid) as info:
+        loader._check_params(Params, {"lookahead_s": 3000.0}, "resolver.params", filled)
+    assert info.value.path == "resolver.lookahead"
+    assert "expected a number in (0, 600] s, got 3000.0 for resolver.params.lookahead_s" in str(
+        info.value
+    )
+
+
+def test_validated_params_are_picklable_and_json():
+    import json
+    import pickle
+
+    data = _with("resolver.kind", "bands")
+    data["resolver"]["params"] = {"left_penalty": 0, "model_turn": True}
+    sc = from_dict(data)
+    assert sc.resolver.params == {"left_penalty": 0.0, "model_turn": True}
+    assert pickle.loads(pickle.dumps(sc)) == sc
+    json.dumps(dataclasses.asdict(sc))
+
+
+def test_signed_zero_spread_means_zero():
+    data = _with("traffic.pattern", "ring")
+    data["traffic"].update(count=4, radius=20000.0, speed_spread=-0.0)
+    sc = from_dict(data)
+    assert math.copysign(1.0, sc.traffic.speed_spread) == 1.0
+    assert len(build_aircraft(sc, 0)) == 6
+
+
+def test_validate_params_is_generic():
+    from airspace_sim import parts
+
+    @dataclasses.dataclass(frozen=True)
+    class Params:
+        sigma_accel: float | None = parts.param(None, unit="m/s²", ge=0, le=100)
+        mode: str = parts.param("a", choices=("a", "b"))
+
+    assert loader.validate_params(Params, {}, "tracker.params") == Params()
+    assert loader.validate_params(Params, {"sigma_accel": 2}, "t").sigma_accel == 2.0
+    with pytest.raises(
+        UserError, match=r"^t\.sigma_accel: expected a number in \[0, 100\] m/s², got 1000000000.0"
+    ):
+        loader.validate_params(Params, {"sigma_accel": 1e9}, "t")
+    with pytest.raises(UserError, match=r"^t\.mode: expected one of a, b, got 'c'"):
+        loader.validate_params(Params, {"mode": "c"}, "t")
+    with pytest.raises(UserError, match=r"^t\.x: unknown key, got 1 \(known: sigma_accel, mode\)"):
+        loader.validate_params(Params, {"x": 1}, "t")

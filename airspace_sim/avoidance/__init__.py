@@ -4,8 +4,9 @@
 - :mod:`.heading`: exact world-frame heading changes (own speed kept, heading turned).
 - :mod:`.bands`: multi-intruder heading bands over a look-ahead (DAIDALUS-style).
 - :mod:`.probability`: conflict probability from the IMM's mode mixture.
-- :mod:`.resolvers`: the registry entries ``"none"``, ``"seed"``, ``"seed-world"``,
-  ``"bands"``, ``"bands-probabilistic"``.
+- :mod:`.resolvers`: the resolver classes registered as ``"none"``, ``"seed"``,
+  ``"seed-world"``, ``"bands"``, ``"bands-probabilistic"`` (protocol
+  :class:`airspace_sim.parts.Resolver`), and :func:`~.resolvers.build_resolver`.
 
 Units: metres, seconds, radians; angles CCW positive (a negative heading change is a right
 turn); relative quantities are intruder minus ownship.

@@ -1,16 +1,17 @@
-"""Conflict resolvers by name (issue 3; ``docs/dev/CONTRACTS.md``, "Resolvers").
+"""The built-in conflict resolvers (paper §V; protocol :class:`airspace_sim.parts.Resolver`).
 
-``airspace_sim.registry.get("resolver", name)(**params)`` returns an object with
+Each is a class registered by name, constructed as ``cls(params)`` with its ``Params``
+dataclass (fields with units and valid ranges, validated by the scenario loader), and
+declares its capabilities (``uses_mode_predictions``, ``uses_turn_rate``, ``prefilter``,
+``reports_band``) instead of being recognised by name::
 
     resolve(own_velocity (N, 2), rel_position (N, K, 2), rel_velocity (N, K, 2),
-            valid (N, K) bool, max_heading_change (N,) rad,
-            mode_predictions=None, rel_covariance=None) -> ResolverOutput
+            valid (N, K) bool, max_heading_change (N,) rad, *,
+            mode_predictions=None, turn_rate=None) -> ResolverOutput
 
 ``rel_*`` are intruder minus ownship in the world frame (m, m/s). ``heading_change`` is the
 turn the ownship should make now, rad CCW positive (negative = right turn), with
-``|heading_change| ≤ max_heading_change``. ``mode_predictions`` is used by
-``"bands-probabilistic"`` only (format in :class:`ProbabilisticBandsResolver`);
-``rel_covariance`` is accepted for the contract and ignored by the built-in resolvers.
+``|heading_change| ≤ max_heading_change``.
 
 The band resolvers judge a candidate as if the heading change were made at once; a caller
 with a turn-rate limit can pass a wide ``max_heading_change`` (a target-heading search, as
@@ -25,14 +26,14 @@ Names:
 - ``"seed-world"``: same detection and governing intruder, but the exact world-frame heading
   change of :func:`tangent_heading_change` (clamped; ``θ`` where the tangent is unreachable).
 - ``"bands"``: the multi-intruder band search of :mod:`airspace_sim.avoidance.bands`
-  (``left_penalty`` > 0, e.g. 10°, biases it toward right turns: on converging rings of 16
-  aircraft that keeps every pair clear where the plain smallest-``|ψ|`` rule does not).
+  (``left_penalty`` > 0 biases it toward right turns; see ``docs/tuning.md``).
 - ``"bands-probabilistic"``: bands over the intruders whose conflict probability
   (:mod:`airspace_sim.avoidance.probability`, from ``mode_predictions``) reaches
   ``threshold``; falls back to ``"bands"`` without ``mode_predictions``.
 
 ``r_safe`` defaults to 3000 m, the paper's ``R_safety`` (§VI), for every resolver; scenarios
-set their own (e.g. 5 NM = 9260 m en route).
+set their own (e.g. 5 NM = 9260 m en route). :func:`build_resolver` makes a scenario's
+resolver.
 """
 
 from __future__ import annotations
@@ -41,14 +42,32 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from airspace_sim import parts, registry
 from airspace_sim.avoidance.bands import DEFAULT_RESOLUTION, band_search
 from airspace_sim.avoidance.escape import escape_angle, predicted_conflict
 from airspace_sim.avoidance.heading import tangent_heading_change
 from airspace_sim.avoidance.probability import conflict_probability, conflict_probability_bound
-from airspace_sim.registry import register
+from airspace_sim.parts import param
 
 #: The paper's safety radius R_safety, metres (§VI).
 DEFAULT_R_SAFE = 3000.0
+
+#: Physically meaningful bounds shared by the resolvers' parameters.
+MAX_R_SAFE_M = 1e6
+MAX_LOOKAHEAD_S = 3600.0
+MAX_MARGIN = 10.0
+
+
+def _r_safe(default=DEFAULT_R_SAFE):
+    return param(default, unit="m", doc="safety radius", gt=0, le=MAX_R_SAFE_M)
+
+
+def _lookahead(default=120.0):
+    return param(default, unit="s", doc="look-ahead of the CPA test", gt=0, le=MAX_LOOKAHEAD_S)
+
+
+def _margin(default):
+    return param(default, doc="extra fraction of r_safe kept clear", ge=0, le=MAX_MARGIN)
 
 
 @dataclass
@@ -90,13 +109,15 @@ def _arrays(own_velocity, rel_position, rel_velocity, valid, max_heading_change)
     return vo, r, v, valid, mx
 
 
-class NoResolver:
+@registry.register("resolver", "none")
+class NoResolver(parts.Resolver):
     """Never turns; ``conflict`` is the CPA test of ``"bands"`` at the current heading."""
 
-    prefilter = uses_mode_predictions = uses_turn_rate = reports_band = False
-
-    def __init__(self, r_safe=DEFAULT_R_SAFE, lookahead_s=120.0, margin=0.0):
-        self.r_safe, self.lookahead_s, self.margin = float(r_safe), float(lookahead_s), margin
+    @dataclass(frozen=True)
+    class Params:
+        r_safe: float = _r_safe()
+        lookahead_s: float = _lookahead()
+        margin: float = _margin(0.0)
 
     def resolve(
         self,
@@ -105,10 +126,11 @@ class NoResolver:
         rel_velocity,
         valid,
         max_heading_change,
+        *,
         mode_predictions=None,
-        rel_covariance=None,
         turn_rate=None,
     ):
+        p = self.params
         vo, r, v, valid, mx = _arrays(
             own_velocity, rel_position, rel_velocity, valid, max_heading_change
         )
@@ -118,29 +140,30 @@ class NoResolver:
             v,
             valid,
             np.zeros_like(mx),
-            self.r_safe,
-            self.lookahead_s,
-            self.margin,
+            p.r_safe,
+            p.lookahead_s,
+            p.margin,
             exact_candidates=False,
         )
         return ResolverOutput(np.zeros(vo.shape[0]), res.conflict)
 
 
-class SeedResolver:
-    """The paper's escape rotation (§V), relative-frame reading: heading change = ``θ``.
+@registry.register("resolver", "seed")
+class SeedResolver(parts.Resolver):
+    """The paper's escape rotation (§V), relative-frame reading: heading change = ``θ``."""
 
-    Parameters: ``r_safe`` (m, 3000), ``dt`` (prediction step, s; the seed preset's 0.1),
-    ``horizon`` (steps, 3), ``max_angle`` (rad, π/4), ``world_frame`` (use the exact
-    world-frame heading change instead of ``θ``).
-    """
+    #: use the exact world-frame heading change instead of ``θ`` (``"seed-world"``)
+    world_frame = False
 
-    prefilter = uses_mode_predictions = uses_turn_rate = reports_band = False
-
-    def __init__(
-        self, r_safe=DEFAULT_R_SAFE, dt=0.1, horizon=3, max_angle=np.pi / 4, world_frame=False
-    ):
-        self.r_safe, self.dt, self.horizon = float(r_safe), float(dt), int(horizon)
-        self.max_angle, self.world_frame = float(max_angle), bool(world_frame)
+    @dataclass(frozen=True)
+    class Params:
+        r_safe: float = _r_safe()
+        #: the seed preset's step; in a world the loader fills the world's dt
+        dt: float = param(0.1, unit="s", doc="prediction step", gt=0, le=60.0)
+        horizon: int = param(3, unit="steps", doc="look-ahead of the detector", ge=1, le=1000)
+        max_angle: float = param(
+            float(np.pi / 4), unit="rad", doc="bound on the rotation θ", gt=0, le=float(np.pi)
+        )
 
     def resolve(
         self,
@@ -149,22 +172,21 @@ class SeedResolver:
         rel_velocity,
         valid,
         max_heading_change,
+        *,
         mode_predictions=None,
-        rel_covariance=None,
         turn_rate=None,
     ):
+        p = self.params
         vo, r, v, valid, mx = _arrays(
             own_velocity, rel_position, rel_velocity, valid, max_heading_change
         )
         n, k = valid.shape
-        theta, pair_conflict = escape_angle(
-            r, v, self.r_safe, self.dt, self.horizon, self.max_angle
-        )
+        theta, pair_conflict = escape_angle(r, v, p.r_safe, p.dt, p.horizon, p.max_angle)
         pair_conflict &= valid
         # governing intruder: earliest predicted conflict step, then nearest
-        first = np.full((n, k), self.horizon + 1.0)
-        for j in range(self.horizon, 0, -1):  # small fixed horizon
-            inside = predicted_conflict(r, v, self.r_safe, self.dt * j, 1)
+        first = np.full((n, k), p.horizon + 1.0)
+        for j in range(p.horizon, 0, -1):  # small fixed horizon
+            inside = predicted_conflict(r, v, p.r_safe, p.dt * j, 1)
             first = np.where(inside, float(j), first)
         dist = np.hypot(r[..., 0], r[..., 1])
         key = np.where(pair_conflict, first * 1e12 + dist, np.inf)
@@ -175,46 +197,55 @@ class SeedResolver:
         rows = np.arange(n)
         psi = theta[rows, gov]
         if self.world_frame:
-            exact, ok = tangent_heading_change(vo, v[rows, gov] + vo, r[rows, gov], self.r_safe)
-            psi = np.where(ok, np.clip(exact, -self.max_angle, self.max_angle), psi)
+            exact, ok = tangent_heading_change(vo, v[rows, gov] + vo, r[rows, gov], p.r_safe)
+            psi = np.where(ok, np.clip(exact, -p.max_angle, p.max_angle), psi)
         psi = np.where(conflict, np.clip(psi, -mx, mx), 0.0)
         return ResolverOutput(psi, conflict)
 
 
-class BandsResolver:
+@registry.register("resolver", "seed-world")
+class SeedWorldResolver(SeedResolver):
+    """``"seed"`` with the exact world-frame heading change onto the tangent
+    (:func:`~airspace_sim.avoidance.heading.tangent_heading_change`, clamped to
+    ``max_angle``; ``θ`` where the tangent is unreachable)."""
+
+    world_frame = True
+
+
+@registry.register("resolver", "bands")
+class BandsResolver(parts.Resolver):
     """Multi-intruder band search (:func:`~airspace_sim.avoidance.bands.band_search`).
 
-    Parameters: ``r_safe`` (m, 3000), ``lookahead_s`` (s, 120), ``margin`` (0.1: clear
-    distance ``r_safe·(1+margin)``), ``resolution`` (rad, 1°), ``exact_candidates`` (True),
-    ``left_penalty`` (rad, 0: left turns rank as ``|ψ| + left_penalty``, a right-turn bias),
-    ``model_turn`` (False; True: when the caller passes ``turn_rate`` to :meth:`resolve`, each
-    candidate is judged as flown, turning at that rate until reached, then straight; False:
-    as if the heading changed at once), ``full_band`` (False; True: ``band`` and
-    ``min_ratio`` of every candidate, for drawing or analysis; False: only what the choice
-    needs, the same choice, much faster).
+    With ``model_turn`` and a ``turn_rate`` from the caller each candidate is judged as
+    flown (turning at that rate until reached, then straight); otherwise as if the heading
+    changed at once.
     """
 
-    prefilter = uses_turn_rate = reports_band = True
-    uses_mode_predictions = False
+    uses_turn_rate = True
+    prefilter = True
+    reports_band = True
 
-    def __init__(
-        self,
-        r_safe=DEFAULT_R_SAFE,
-        lookahead_s=120.0,
-        margin=0.1,
-        resolution=DEFAULT_RESOLUTION,
-        exact_candidates=True,
-        left_penalty=0.0,
-        model_turn=False,
-        full_band=False,
-    ):
-        self.r_safe, self.lookahead_s, self.margin = float(r_safe), float(lookahead_s), margin
-        self.resolution, self.exact_candidates = float(resolution), bool(exact_candidates)
-        self.left_penalty = float(left_penalty)
-        self.model_turn = bool(model_turn)
-        self.full_band = bool(full_band)
+    @dataclass(frozen=True)
+    class Params:
+        r_safe: float = _r_safe()
+        lookahead_s: float = _lookahead()
+        margin: float = _margin(0.1)
+        resolution: float = param(
+            DEFAULT_RESOLUTION, unit="rad", doc="candidate spacing", gt=0, le=float(np.pi / 2)
+        )
+        exact_candidates: bool = param(True, doc="add the exact band edges as candidates")
+        left_penalty: float = param(
+            0.0, unit="rad", doc="left turns rank as |ψ| + left_penalty", ge=0, le=float(np.pi)
+        )
+        model_turn: bool = param(False, doc="judge candidates as flown at turn_rate")
+        full_band: bool = param(
+            False,
+            doc="band and min_ratio of every candidate (for drawing or analysis); false: "
+            "only what the choice needs, the same choice, much faster",
+        )
 
     def _search(self, vo, r, v, valid, mx, r_safe, turn_rate=None):
+        p = self.params
         return band_search(
             vo,
             r,
@@ -222,13 +253,13 @@ class BandsResolver:
             valid,
             mx,
             r_safe,
-            self.lookahead_s,
-            self.margin,
-            self.resolution,
-            self.exact_candidates,
-            self.left_penalty,
-            turn_rate if self.model_turn else None,
-            full=self.full_band,
+            p.lookahead_s,
+            p.margin,
+            p.resolution,
+            p.exact_candidates,
+            p.left_penalty,
+            turn_rate if p.model_turn else None,
+            full=p.full_band,
         )
 
     def resolve(
@@ -238,14 +269,14 @@ class BandsResolver:
         rel_velocity,
         valid,
         max_heading_change,
+        *,
         mode_predictions=None,
-        rel_covariance=None,
         turn_rate=None,
     ):
         vo, r, v, valid, mx = _arrays(
             own_velocity, rel_position, rel_velocity, valid, max_heading_change
         )
-        res = self._search(vo, r, v, valid, mx, self.r_safe, turn_rate)
+        res = self._search(vo, r, v, valid, mx, self.params.r_safe, turn_rate)
         return ResolverOutput(
             res.heading_change,
             res.conflict,
@@ -257,6 +288,7 @@ class BandsResolver:
         )
 
 
+@registry.register("resolver", "bands-probabilistic")
 class ProbabilisticBandsResolver(BandsResolver):
     """Bands over the intruders with ``P(conflict) ≥ threshold`` (paper §VI assumption 4).
 
@@ -270,12 +302,15 @@ class ProbabilisticBandsResolver(BandsResolver):
     threshold, and that bound (below the threshold) elsewhere.
     """
 
-    prefilter = False
     uses_mode_predictions = True
+    #: the conflict test is on probabilities, not the CPA test alone
+    prefilter = False
 
-    def __init__(self, threshold=0.05, **params):
-        super().__init__(**params)
-        self.threshold = float(threshold)
+    @dataclass(frozen=True)
+    class Params(BandsResolver.Params):
+        threshold: float = param(
+            0.05, doc="conflict probability at which an intruder counts", gt=0, le=1
+        )
 
     def resolve(
         self,
@@ -284,8 +319,8 @@ class ProbabilisticBandsResolver(BandsResolver):
         rel_velocity,
         valid,
         max_heading_change,
+        *,
         mode_predictions=None,
-        rel_covariance=None,
         turn_rate=None,
     ):
         if mode_predictions is None:
@@ -305,12 +340,13 @@ class ProbabilisticBandsResolver(BandsResolver):
         ps = np.broadcast_to(ps, valid.shape + ps.shape[-4:])
         mu = np.broadcast_to(mu, valid.shape + mu.shape[-1:])
         # the quadrature only where the closed-form upper bound can reach the threshold
-        prob = np.where(valid, conflict_probability_bound(xs, ps, mu, self.r_safe), 0.0)
-        need = valid & (prob >= self.threshold)
+        r_safe, threshold = self.params.r_safe, self.params.threshold
+        prob = np.where(valid, conflict_probability_bound(xs, ps, mu, r_safe), 0.0)
+        need = valid & (prob >= threshold)
         if need.any():
-            prob[need] = conflict_probability(xs[need], ps[need], mu[need], self.r_safe)
-        threat = valid & (prob >= self.threshold)
-        res = self._search(vo, r, v, threat, mx, self.r_safe, turn_rate)
+            prob[need] = conflict_probability(xs[need], ps[need], mu[need], r_safe)
+        threat = valid & (prob >= threshold)
+        res = self._search(vo, r, v, threat, mx, r_safe, turn_rate)
         return ResolverOutput(
             res.heading_change,
             threat.any(axis=-1),
@@ -323,13 +359,13 @@ class ProbabilisticBandsResolver(BandsResolver):
         )
 
 
-register("resolver", "none")(NoResolver)
-register("resolver", "seed")(SeedResolver)
-register("resolver", "bands")(BandsResolver)
-register("resolver", "bands-probabilistic")(ProbabilisticBandsResolver)
+def build_resolver(scenario):
+    """The scenario's resolver, constructed from its validated parameters (no checks here).
 
+    The loader (:func:`airspace_sim.scenarios.loader.resolver_params`) fills the ``Params``
+    fields ``r_safe``, ``lookahead_s``, ``margin`` and ``dt`` from the scenario when the
+    resolver declares them, ``resolver.params`` on top, and has validated the result.
+    """
+    from airspace_sim.scenarios.loader import resolver_params
 
-@register("resolver", "seed-world")
-def _seed_world(**params):
-    """``"seed"`` with the exact world-frame heading change (``world_frame=True``)."""
-    return SeedResolver(world_frame=True, **params)
+    return registry.build("resolver", scenario.resolver.kind, params=resolver_params(scenario))

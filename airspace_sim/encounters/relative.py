@@ -42,6 +42,7 @@ or worker runs it.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import asdict, dataclass, field
 
@@ -79,12 +80,12 @@ class EncounterConfig:
     init_sigma_velocity : σ of the initial track's velocity error, m/s.
     false_detection_window_s : world/relative: a step counts as "during an own manoeuvre"
         if the ownship turned within this many seconds before it.
-    lookahead_s : look-ahead of the band resolvers, s.
+    lookahead_s : look-ahead of every resolver whose ``Params`` has ``lookahead_s``, s.
     target_heading_limit : world frame: resolvers choose a heading change within ± this
         (rad, default π: any heading); the ownship turns toward it at ``max_turn_rate``.
     probability_horizon_s : look-ahead of the IMM mode predictions given to
         ``bands-probabilistic`` (10 points spread over it), s.
-    resolver_params : extra keyword arguments for the resolver factory.
+    resolver_params : per resolver name, a table of its ``Params`` values (validated).
     """
 
     preset: str = "seed"
@@ -244,22 +245,29 @@ def straight_cpa(p0: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 # ----------------------------------------------------------------------------- resolvers
 def make_resolver(name: str, cfg: EncounterConfig, dt: float):
-    """The registry's resolver ``name`` with this config's r_safe (and dt/horizon for seed*)."""
+    """The registry's resolver ``name`` with this config's values for the ``Params`` fields
+    it declares (``r_safe``, ``lookahead_s``, the detector's ``dt`` and ``horizon``), then
+    ``cfg.resolver_params[name]`` on top, validated against its ``Params``."""
     from airspace_sim import registry
+    from airspace_sim.scenarios.loader import validate_params
 
-    factory = registry.get("resolver", name)
-    params = {"r_safe": cfg.r_safe}
-    if name.startswith("seed"):
-        params.update(dt=dt, horizon=int(cfg.horizon))
-    elif name.startswith("bands"):
-        params.update(lookahead_s=cfg.lookahead_s)
-    params.update(
-        cfg.resolver_params.get(name, {}) if isinstance(cfg.resolver_params.get(name), dict) else {}
-    )
-    try:
-        return factory(**params)
-    except TypeError:
-        return factory(r_safe=cfg.r_safe)
+    Params = registry.params_class("resolver", name)
+    offered = {
+        "r_safe": cfg.r_safe,
+        "lookahead_s": cfg.lookahead_s,
+        "dt": dt,
+        "horizon": int(cfg.horizon),
+    }
+    declared = {f.name for f in dataclasses.fields(Params) if f.init}
+    table = {k: v for k, v in offered.items() if k in declared}
+    extra = cfg.resolver_params.get(name, {})
+    if not isinstance(extra, dict):
+        raise UserError(
+            f"encounter config: resolver_params[{name!r}]: expected a table, got {extra!r}"
+        )
+    table.update(extra)
+    params = validate_params(Params, table, f"encounter config: resolver {name!r} params")
+    return registry.build("resolver", name, params=params)
 
 
 def make_imm(preset, x0: np.ndarray, P0: np.ndarray, mu0: np.ndarray):
@@ -511,7 +519,7 @@ def run_relative(
     cdf = mode_cdf(preset)
     sigma = cfg.sigma()
     res = make_resolver(resolver, cfg, dt)
-    probabilistic = resolver.endswith("probabilistic")
+    probabilistic = res.uses_mode_predictions
     window = int(round(cfg.false_detection_window_s / dt))
 
     p0, u = initial_geometry(draws, cfg)

@@ -131,7 +131,7 @@ def run_world(
     own_cdf = mode_cdf(preset)
     sigma = cfg.sigma()
     res = make_resolver(resolver, cfg, dt)
-    probabilistic = resolver.endswith("probabilistic")
+    probabilistic = res.uses_mode_predictions
     window = int(round(cfg.false_detection_window_s / dt))
     max_step = np.full(B, cfg.max_turn_rate * dt)
     target_limit = np.full(B, max(cfg.target_heading_limit, cfg.max_turn_rate * dt))

@@ -3,8 +3,15 @@
 The checks are derived from the dataclasses in :mod:`.schema`: every field's type comes from
 its annotation (``float``, ``int``, ``str``, ``bool``, ``dict``, ``tuple[float, float]``,
 ``list[X]``, ``X | None`` and nested dataclasses), and :data:`RANGES` adds what a type cannot
-say (positive time step, probabilities in [0, 1], names that must exist). A new schema field
-is validated with no change here as long as its type is one of those.
+say (positive time step, probabilities in [0, 1], physically meaningful bounds, names that
+must exist); :func:`check_scenario` adds the rules between fields. A new schema field is
+validated with no change here as long as its type is one of those.
+
+The parts' own parameters (``resolver.params``, ``sensor.params``, ``tracker.params``) are
+validated the same way against the part's ``Params`` dataclass, whose fields declare their
+ranges (:func:`airspace_sim.parts.param`; :func:`check_parts`, :func:`validate_params`).
+This is the one validation pass: the world and its parts trust the resulting
+:class:`Scenario` and check nothing again.
 
 Every problem becomes one :class:`~airspace_sim.errors.UserError` line naming the file, the
 dotted key and the value::
@@ -39,6 +46,8 @@ INTERNAL_FIELDS = {("Scenario", "source")}
 
 #: Traffic patterns :func:`airspace_sim.scenarios.traffic.build_aircraft` knows.
 TRAFFIC_PATTERNS = ("none", "ring", "random", "encounter")
+#: Id prefix of the aircraft each pattern generates (``ring00``, ``ring01``, ...).
+GENERATED_ID_PREFIX = {"ring": "ring", "random": "ac", "encounter": "intruder"}
 
 
 class Invalid(Exception):
@@ -94,53 +103,126 @@ def _preset_names():
     return sorted(PRESETS)
 
 
-POSITIVE = _check("a positive number", lambda v: v > 0)
-NON_NEGATIVE = _check("a non-negative number", lambda v: v >= 0)
-POSITIVE_INT = _check("a positive integer", lambda v: v >= 1)
-NON_NEGATIVE_INT = _check("a non-negative integer", lambda v: v >= 0)
+def _range(
+    lo: float | None = None,
+    hi: float | None = None,
+    *,
+    lo_open: bool = False,
+    unit: str = "",
+    integer: bool = False,
+) -> Callable[[Any], str | None]:
+    """A number in ``[lo, hi]`` (``(lo, hi]`` with ``lo_open``); ``None`` = unbounded."""
+    noun = "integer" if integer else "number"
+    if (lo == 0 and lo_open) or (integer and lo == 1):
+        what = f"a positive {noun}"
+    elif lo == 0:
+        what = f"a non-negative {noun}"
+    elif lo is not None:
+        what = f"{'an' if integer else 'a'} {noun} {'>' if lo_open else '≥'} {lo:g}"
+    else:
+        what = f"an {noun}" if integer else f"a {noun}"
+    if hi is not None:
+        what += f" up to {hi:g}"
+    if unit:
+        what += f" ({unit})"
+
+    def ok(v):
+        if lo is not None and not (v > lo if lo_open else v >= lo):
+            return False
+        return hi is None or v <= hi
+
+    return _check(what, ok)
+
+
+def _points(limit: float) -> Callable[[Any], str | None]:
+    """A point ``(x, y)`` or a list of points with every coordinate within ``±limit`` m."""
+
+    def ok(v):
+        pts = [v] if v and not isinstance(v[0], (tuple, list)) else v
+        return all(abs(c) <= limit for pt in pts for c in pt)
+
+    def check(value):
+        return None if ok(value) else f"expected coordinates within ±{limit:g} m"
+
+    return check  # no ``what``: a wrong shape keeps its type message
+
+
+def _params_range(meta, tp) -> Callable[[Any], str | None] | None:
+    """The check of a part's ``Params`` field of type ``tp`` from its
+    :func:`airspace_sim.parts.param` metadata (bounds, choices); None without any."""
+    from airspace_sim import parts
+
+    what = parts.describe_range(meta)
+    if what is None:
+        return None
+    if "choices" not in meta:
+        what = f"{describe(tp)} {what}"
+    return _check(what, lambda v: parts.in_range(meta, v))
+
+
+#: Physically meaningful limits (issue 11: beyond them the simulation overflows or runs
+#: out of memory rather than failing cleanly).
+MAX_DISTANCE_M = 1e7  #: ranges, radii, sectors: 10 000 km
+MAX_COORDINATE_M = 1e8  #: positions and waypoints
+MAX_SPEED = 1000.0  #: m/s (about Mach 3)
+MAX_TIME_S = 1e7  #: durations and time constants: about 4 months
+MAX_LOOKAHEAD_S = 3600.0
+MAX_STEPS = 10_000_000  #: duration / dt
+MAX_AIRCRAFT = 10_000  #: generated traffic (the track table grows as N²)
+MAX_PROBABILITY_SAMPLES = 1000
+
+POSITIVE = _range(0, lo_open=True)
+NON_NEGATIVE = _range(0)
+POSITIVE_INT = _range(1, integer=True)
+NON_NEGATIVE_INT = _range(0, integer=True)
 PROBABILITY = _check("a probability in [0, 1]", lambda v: 0.0 <= v <= 1.0)
 NON_EMPTY = _check("a non-empty string", lambda v: bool(v.strip()))
+TURN_PREFERENCES = ("right", "nearest", "none")
 
-#: Extra checks per ``"Class.field"`` beyond the annotated type.
+#: Extra checks per ``"Class.field"`` beyond the annotated type: every value rule of the
+#: scenario lives here or in :func:`check_scenario` (cross-field), nowhere else.
 RANGES: dict[str, Callable[[Any], str | None]] = {
     "Scenario.name": NON_EMPTY,
-    "Scenario.seed": NON_NEGATIVE_INT,
-    "Scenario.dt": POSITIVE,
-    "Scenario.duration": POSITIVE,
+    "Scenario.seed": _range(0, 2**63 - 1, integer=True),
+    "Scenario.dt": _range(0, 60.0, lo_open=True, unit="s"),
+    "Scenario.duration": _range(0, MAX_TIME_S, lo_open=True, unit="s"),
     "Scenario.model": _one_of(_preset_names),
-    "Separation.r_safe": POSITIVE,
-    "Separation.nmac": POSITIVE,
+    "Separation.r_safe": _range(0, 1e6, lo_open=True, unit="m"),
+    "Separation.nmac": _range(0, 1e6, lo_open=True, unit="m"),
     "SensorSpec.kind": _one_of_registry("sensor"),
-    "SensorSpec.range": POSITIVE,
-    "SensorSpec.sigma": NON_NEGATIVE,
+    "SensorSpec.range": _range(0, MAX_DISTANCE_M, lo_open=True, unit="m"),
+    "SensorSpec.sigma": _range(0, 1e5, unit="m"),
     "SensorSpec.detection_probability": PROBABILITY,
-    "SensorSpec.period": POSITIVE,
-    "SensorSpec.drop_after_misses": POSITIVE_INT,
+    "SensorSpec.period": _range(0, MAX_LOOKAHEAD_S, lo_open=True, unit="s"),
+    "SensorSpec.drop_after_misses": _range(1, 1000, integer=True),
     "TrackerSpec.kind": _one_of_registry("tracker", extra=("truth",)),  # truth: no filter
     "TrackerSpec.model": _one_of(_preset_names),
     "ResolverSpec.kind": _one_of_registry("resolver"),
-    "ResolverSpec.lookahead": POSITIVE,
-    "ResolverSpec.margin": NON_NEGATIVE,
+    "ResolverSpec.lookahead": _range(0, MAX_LOOKAHEAD_S, lo_open=True, unit="s"),
+    "ResolverSpec.margin": _range(0, 10.0),
     "ResolverSpec.search_deg": _check("a number of degrees in (0, 180]", lambda v: 0 < v <= 180),
-    "ResolverSpec.turn_preference": _one_of(("right", "nearest", "none")),
-    "ResolverSpec.confirm_s": NON_NEGATIVE,
-    "ResolverSpec.resume_margin": NON_NEGATIVE,
-    "ResolverSpec.resume_decay_s": POSITIVE,
-    "ResolverSpec.probability_horizon_s": POSITIVE,
-    "ResolverSpec.probability_samples": POSITIVE_INT,
+    "ResolverSpec.turn_preference": _one_of(TURN_PREFERENCES),
+    "ResolverSpec.confirm_s": _range(0, MAX_LOOKAHEAD_S, unit="s"),
+    "ResolverSpec.resume_margin": _range(0, 100.0),
+    "ResolverSpec.resume_decay_s": _range(0, MAX_TIME_S, lo_open=True, unit="s"),
+    "ResolverSpec.probability_horizon_s": _range(0, MAX_LOOKAHEAD_S, lo_open=True, unit="s"),
+    "ResolverSpec.probability_samples": _range(1, MAX_PROBABILITY_SAMPLES, integer=True),
+    "ResolverSpec.side_memory_s": _range(0, MAX_TIME_S, unit="s"),
     "AircraftSpec.id": NON_EMPTY,
-    "AircraftSpec.speed": POSITIVE,
+    "AircraftSpec.position": _points(MAX_COORDINATE_M),
+    "AircraftSpec.waypoints": _points(MAX_COORDINATE_M),
+    "AircraftSpec.speed": _range(0, MAX_SPEED, lo_open=True, unit="m/s"),
     "AircraftSpec.autopilot": _one_of_registry("autopilot"),
-    "AircraftSpec.max_turn_rate_deg": POSITIVE,
+    "AircraftSpec.max_turn_rate_deg": _range(0, 3600.0, unit="deg/s"),
     "TrafficSpec.pattern": _one_of(TRAFFIC_PATTERNS),
-    "TrafficSpec.count": NON_NEGATIVE_INT,
-    "TrafficSpec.radius": POSITIVE,
-    "TrafficSpec.sector": POSITIVE,
-    "TrafficSpec.spawn_clear_s": NON_NEGATIVE,
-    "TrafficSpec.speed": POSITIVE,
-    "TrafficSpec.speed_spread": NON_NEGATIVE,
+    "TrafficSpec.count": _range(0, MAX_AIRCRAFT, integer=True),
+    "TrafficSpec.radius": _range(0, MAX_DISTANCE_M, lo_open=True, unit="m"),
+    "TrafficSpec.sector": _range(0, MAX_DISTANCE_M, lo_open=True, unit="m"),
+    "TrafficSpec.spawn_clear_s": _range(0, MAX_LOOKAHEAD_S, unit="s"),
+    "TrafficSpec.speed": _range(0, MAX_SPEED, lo_open=True, unit="m/s"),
+    "TrafficSpec.speed_spread": _range(0, MAX_SPEED, unit="m/s"),
     "TrafficSpec.autopilot": _one_of_registry("autopilot"),
-    "TrafficSpec.max_turn_rate_deg": POSITIVE,
+    "TrafficSpec.max_turn_rate_deg": _range(0, 3600.0, unit="deg/s"),
     "TrafficSpec.controlled": NON_NEGATIVE_INT,
 }
 
@@ -250,7 +332,7 @@ def _convert(value: Any, tp, path: str) -> Any:
             raise _type_error(tp, value, path)
         if not math.isfinite(value):
             raise Invalid(path, f"expected a finite number, got {_show(value)}")
-        return float(value)
+        return float(value) + 0.0  # -0.0 → 0.0: a signed zero means nothing here
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise _type_error(tp, value, path)
@@ -287,7 +369,8 @@ def _convert(value: Any, tp, path: str) -> Any:
 
 
 def _hints(cls) -> dict:
-    return typing.get_type_hints(cls, vars(schema))
+    # a part's Params resolves its annotations in its own module
+    return typing.get_type_hints(cls, None if cls.__module__ != schema.__name__ else vars(schema))
 
 
 def _join(path: str, key: str) -> str:
@@ -310,7 +393,8 @@ def build_dataclass(cls, table: Any, path: str = ""):
             hint = f"did you mean {near[0]!r}? " if near else ""
             raise Invalid(
                 _join(path, str(key)),
-                f"unknown key, got {_show(table[key])} ({hint}known: {', '.join(fields)})",
+                f"unknown key, got {_show(table[key])} "
+                f"({hint}known: {', '.join(fields) if fields else 'none, it takes no keys'})",
             )
     kwargs = {}
     for name, f in fields.items():
@@ -320,9 +404,11 @@ def build_dataclass(cls, table: Any, path: str = ""):
             if required:
                 raise Invalid(key_path, f"missing (required: {describe(hints[name])})")
             continue
-        kwargs[name] = convert(
-            table[name], hints[name], key_path, RANGES.get(f"{cls.__name__}.{name}")
-        )
+        if cls.__module__ == schema.__name__:
+            check = RANGES.get(f"{cls.__name__}.{name}")
+        else:  # a part's Params: the range its field declares
+            check = _params_range(f.metadata, hints[name])
+        kwargs[name] = convert(table[name], hints[name], key_path, check)
     return cls(**kwargs)
 
 
@@ -335,8 +421,26 @@ def check_scenario(sc: Scenario) -> None:
     for i, aid in enumerate(ids):
         if aid in ids[:i]:
             raise Invalid(f"aircraft[{i}].id", f"duplicate aircraft id, got {aid!r}")
+    if sc.traffic.pattern in GENERATED_ID_PREFIX and sc.traffic.count:
+        from airspace_sim.scenarios.traffic import _ids
+
+        taken = set(ids)
+        prefix = GENERATED_ID_PREFIX[sc.traffic.pattern]
+        for gid in _ids(prefix, sc.traffic.count):
+            if gid in taken:
+                i = ids.index(gid)
+                raise Invalid(
+                    f"aircraft[{i}].id",
+                    f"expected an id unlike the generated {sc.traffic.pattern} aircraft "
+                    f"({prefix}00, {prefix}01, ...), got {gid!r}",
+                )
     if sc.dt > sc.duration:
         raise Invalid("duration", f"expected at least dt ({sc.dt:g} s), got {sc.duration:g}")
+    if sc.duration / sc.dt > MAX_STEPS:
+        raise Invalid(
+            "duration",
+            f"expected at most {MAX_STEPS} steps of dt = {sc.dt:g} s, got {sc.duration:g} s",
+        )
     ratio = sc.sensor.period / sc.dt
     if abs(ratio - round(ratio)) > 1e-6 * max(1.0, ratio) or round(ratio) < 1:
         raise Invalid(
@@ -374,6 +478,85 @@ def check_scenario(sc: Scenario) -> None:
             "traffic.pattern",
             "expected an aircraft[0] (the ownship) for pattern 'encounter', got none",
         )
+
+
+# --------------------------------------------------------------------------- part parameters
+
+#: ``Params`` fields filled from the scenario when a resolver declares them:
+#: field → (dotted scenario key, value). ``resolver.params`` overrides them.
+RESOLVER_FILLED = {
+    "r_safe": ("separation.r_safe", lambda sc: sc.separation.r_safe),
+    "lookahead_s": ("resolver.lookahead", lambda sc: sc.resolver.lookahead),
+    "margin": ("resolver.margin", lambda sc: sc.resolver.margin),
+    "dt": ("dt", lambda sc: sc.dt),
+}
+
+
+def _field_names(Params) -> set[str]:
+    return {f.name for f in dataclasses.fields(Params) if f.init}
+
+
+def resolver_params(sc: Scenario) -> dict:
+    """The keyword values of the scenario's resolver ``Params``: :data:`RESOLVER_FILLED`
+    fields it declares, then ``resolver.params``. Validated by :func:`from_dict`; what
+    :func:`airspace_sim.avoidance.resolvers.build_resolver` constructs from."""
+    from airspace_sim import registry
+
+    declared = _field_names(registry.params_class("resolver", sc.resolver.kind))
+    out = {k: get(sc) for k, (_, get) in RESOLVER_FILLED.items() if k in declared}
+    out.update(sc.resolver.params)
+    return out
+
+
+def _check_params(Params, table: dict, path: str, filled: dict | None = None) -> dict:
+    """``table`` validated against dataclass ``Params`` (unknown keys, types, ranges of its
+    :func:`airspace_sim.parts.param` fields); returns the converted values of its keys.
+
+    ``filled`` maps keys taken from elsewhere in the scenario to their dotted key, named in
+    the error instead of ``path.key`` when such a value does not fit.
+    """
+    filled = filled or {}
+    try:
+        built = build_dataclass(Params, table, path)
+    except Invalid as exc:
+        key = exc.path[len(path) + 1 :] if exc.path.startswith(path + ".") else None
+        if key in filled:
+            raise Invalid(filled[key], f"{exc.message} for {path}.{key}") from None
+        raise
+    return {k: getattr(built, k) for k in table}
+
+
+def validate_params(Params, table: dict, where: str):
+    """A ready ``Params`` instance from ``table``, for any kind of part; a one-line
+    :class:`UserError` ``"<where>.<key>: ..."`` on an unknown key (listing the known ones),
+    a wrong type or a value out of the field's declared range."""
+    if not isinstance(table, dict):
+        raise UserError(f"{where}: expected a table, got {_show(table)}")
+    try:
+        return build_dataclass(Params, table, where)
+    except Invalid as exc:
+        raise UserError(str(exc)) from None
+
+
+def check_parts(sc: Scenario) -> None:
+    """Validate the parameters of the scenario's parts against their ``Params``; raises
+    :class:`Invalid`. Replaces each ``*.params`` table by its converted values."""
+    from airspace_sim import registry
+    from airspace_sim.parts import NoParams
+
+    Params = registry.params_class("resolver", sc.resolver.kind)
+    declared = _field_names(Params)
+    filled = {k: src for k, (src, _) in RESOLVER_FILLED.items() if k in declared}
+    filled = {k: v for k, v in filled.items() if k not in sc.resolver.params}
+    values = _check_params(Params, resolver_params(sc), "resolver.params", filled)
+    sc.resolver.params = {k: values[k] for k in sc.resolver.params}
+    sc.sensor.params = _check_params(
+        registry.params_class("sensor", sc.sensor.kind), sc.sensor.params, "sensor.params"
+    )
+    tracker = NoParams
+    if sc.tracker.kind in registry.names("tracker"):  # "truth" runs no filter
+        tracker = registry.params_class("tracker", sc.tracker.kind)
+    sc.tracker.params = _check_params(tracker, sc.tracker.params, "tracker.params")
 
 
 # --------------------------------------------------------------------------- files
@@ -459,6 +642,7 @@ def from_dict(
         sc = build_dataclass(Scenario, data)
         sc.source = source
         check_scenario(sc)
+        check_parts(sc)
     except Invalid as exc:
         raise UserError(_where(exc, source, set_paths)) from None
     return sc

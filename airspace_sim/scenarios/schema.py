@@ -30,6 +30,8 @@ class SensorSpec:
     detection_probability: float = 1.0  #: probability a target in range is reported per scan
     period: float = 1.0  #: seconds between scans (a multiple of the world's dt)
     drop_after_misses: int = 5  #: consecutive missed scans after which a track is dropped
+    #: the sensor's own parameters (its ``Params``; validated by the loader)
+    params: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -38,6 +40,9 @@ class TrackerSpec:
 
     kind: str = "imm"  #: registry name of the tracker ("imm", or a plugin such as "kalman")
     model: str = "realistic"  #: dynamics preset the tracker's mode filters use
+    #: the tracker's own parameters (its ``Params``, e.g. the kalman tracker's
+    #: ``sigma_accel``; validated by the loader)
+    params: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -47,7 +52,9 @@ class ResolverSpec:
     kind: str = "bands"  #: registry name: "none", "seed", "bands", ...
     lookahead: float = 120.0  #: look-ahead in seconds
     margin: float = 0.1  #: extra fraction of r_safe kept clear
-    params: dict = field(default_factory=dict)  #: extra keyword arguments for the resolver
+    #: the resolver's own parameters (its ``Params``; validated by the loader, which also
+    #: fills r_safe, lookahead_s, margin and dt from the scenario where the Params has them)
+    params: dict = field(default_factory=dict)
     #: half-width in degrees of the heading range searched for a clear heading; the aircraft
     #: turns toward the chosen heading at its turn-rate limit (world CDA policy)
     search_deg: float = 90.0
@@ -59,11 +66,12 @@ class ResolverSpec:
     #: poor)
     confirm_s: float = 5.0
     #: extra fraction of r_safe (on top of margin) that a turn back toward the route must
-    #: keep clear over the look-ahead (1.5: rings of 64 clear on seeds 0–9; 0.2, 0.5, 1.0 not)
+    #: keep clear over the look-ahead (wide, so ownships do not turn back into traffic;
+    #: measurements in docs/tuning.md)
     resume_margin: float = 1.5
     #: seconds (> 0) off the route over which resume_margin shrinks linearly to 0 (unset:
-    #: never). Random traffic needs it: there holding the heading until the wide resume
-    #: clearance opened sent whole groups of aircraft out of the sector (dense_random.toml)
+    #: never); random traffic needs it, or aircraft wait for a clearance that never opens
+    #: (docs/tuning.md)
     resume_decay_s: float | None = None
     #: "bands-probabilistic": seconds over which each intruder mode's prediction is judged
     #: (unset: the look-ahead), at this many evenly spaced times

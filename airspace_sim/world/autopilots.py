@@ -2,21 +2,11 @@
 
 An autopilot drives a *group* of aircraft at once (all aircraft with the same autopilot
 name), with arrays, never one Python object per aircraft in the step loop. Registered with
-:func:`airspace_sim.registry.register` as ``"straight"``, ``"route"`` and ``"markov"``.
-
-Interface (a plugin autopilot implements the same)::
-
-    factory(members (n,) int, specs list[AircraftSpec] (n,), context AutopilotContext) -> obj
-    obj.turn_rate(state) -> (n,) commanded turn rate, rad/s CCW+ (the world clips it to the
-        aircraft's limit)
-    obj.desired_heading(state) -> (n,) heading it wants to settle on (rad), NaN for none;
-        the world only resumes toward it when the turn is clear of conflicts
-    obj.after_step(state) -> (n,) bool: finished (the aircraft leaves the world)
-    obj.progress(state) -> (n,) planned distance covered so far, m (NaN: no plan)
-    obj.modes -> (n,) int true Markov mode in effect over the last step, or None
-
-``state`` is a :class:`FlightState` of the *whole* world; use ``members`` to index it.
-All angles radians CCW from east, distances metres, times seconds.
+:func:`airspace_sim.registry.register` as ``"straight"``, ``"route"`` and ``"markov"``; each
+is a class fitting :class:`airspace_sim.parts.Autopilot` (methods, shapes, units and the
+capabilities ``has_plan``, ``has_modes``; constructed as ``cls(members, specs, context,
+params)``). ``state`` is a :class:`FlightState` of the *whole* world; use ``members`` to
+index it. All angles radians CCW from east, distances metres, times seconds.
 """
 
 from __future__ import annotations
@@ -26,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from airspace_sim.dynamics.presets import Preset
+from airspace_sim.parts import Autopilot, NoParams
 from airspace_sim.registry import register
 from airspace_sim.world import streams
 
@@ -63,13 +54,14 @@ def _toward(target_heading, state, members):
     return np.clip(wrap(target_heading - h) / state.dt, -lim, lim)
 
 
-class StraightAutopilot:
+@register("autopilot", "straight")
+class StraightAutopilot(Autopilot):
     """Holds the initial heading (and turns back to it after an avoidance manoeuvre)."""
 
+    Params = NoParams
     has_plan = True
-    has_modes = False
 
-    def __init__(self, members, specs, context: AutopilotContext):
+    def __init__(self, members, specs, context: AutopilotContext, params=None):
         self.members = np.asarray(members, dtype=np.int64)
         self.heading = np.radians([s.heading_deg for s in specs]).astype(float)
         self.start = context.start_positions[self.members].copy()
@@ -89,7 +81,8 @@ class StraightAutopilot:
         return d[:, 0] * np.cos(self.heading) + d[:, 1] * np.sin(self.heading)
 
 
-class RouteAutopilot:
+@register("autopilot", "route")
+class RouteAutopilot(Autopilot):
     """Flies direct to each waypoint in turn, within the turn-rate limit.
 
     A waypoint is reached when the aircraft is within one step's travel of it or has passed
@@ -98,10 +91,10 @@ class RouteAutopilot:
     behaves like ``"straight"``.
     """
 
+    Params = NoParams
     has_plan = True
-    has_modes = False
 
-    def __init__(self, members, specs, context: AutopilotContext):
+    def __init__(self, members, specs, context: AutopilotContext, params=None):
         self.members = m = np.asarray(members, dtype=np.int64)
         n = m.size
         self.count = np.array([len(s.waypoints) for s in specs], dtype=np.int64)
@@ -199,7 +192,8 @@ class RouteAutopilot:
         )
 
 
-class MarkovAutopilot:
+@register("autopilot", "markov")
+class MarkovAutopilot(Autopilot):
     """The paper's jump-Markov pilot (§II): modes straight / left / right at the preset's turn
     rates, the mode chain Π of the preset at the world's dt, drawn per aircraft from its own
     counter-based stream (:mod:`.streams`). Turn rates are clipped to the aircraft's limit.
@@ -208,10 +202,10 @@ class MarkovAutopilot:
     :mod:`airspace_sim.dynamics.truth`).
     """
 
-    has_plan = False
+    Params = NoParams
     has_modes = True
 
-    def __init__(self, members, specs, context: AutopilotContext):
+    def __init__(self, members, specs, context: AutopilotContext, params=None):
         self.members = np.asarray(members, dtype=np.int64)
         self.keys = context.keys[self.members]
         self.rates = np.asarray(context.preset.turn_rates, dtype=float)
@@ -239,8 +233,3 @@ class MarkovAutopilot:
 
     def progress(self, state):
         return np.full(self.members.size, np.nan)
-
-
-register("autopilot", "straight")(StraightAutopilot)
-register("autopilot", "route")(RouteAutopilot)
-register("autopilot", "markov")(MarkovAutopilot)

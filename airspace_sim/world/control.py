@@ -9,49 +9,9 @@ runs the resolver on them.
 
 from __future__ import annotations
 
-import inspect
 from dataclasses import dataclass
 
 import numpy as np
-
-from airspace_sim import registry
-
-
-def build_resolver(scenario, dt: float):
-    """The scenario's resolver object, with the keyword arguments it accepts."""
-    factory = registry.get("resolver", scenario.resolver.kind)
-    offered = {
-        "r_safe": scenario.separation.r_safe,
-        "lookahead_s": scenario.resolver.lookahead,
-        "margin": scenario.resolver.margin,
-        "dt": dt,
-    }
-    try:
-        params = inspect.signature(factory).parameters
-        takes_any = any(p.kind is p.VAR_KEYWORD for p in params.values())
-    except (TypeError, ValueError):
-        params, takes_any = {}, True
-    extra = dict(scenario.resolver.params)
-    # Most specific first; a factory taking **params may forward to a constructor that
-    # rejects some of them, so retry with fewer.
-    tries = (
-        ("r_safe", "lookahead_s", "margin", "dt"),
-        ("r_safe", "lookahead_s", "margin"),
-        ("r_safe", "lookahead_s"),
-        ("r_safe",),
-        (),
-    )
-    last = None
-    for names in tries:
-        kwargs = {k: offered[k] for k in names if takes_any or k in params}
-        kwargs.update(extra)
-        try:
-            return factory(**kwargs)
-        except TypeError as exc:
-            if "keyword" not in str(exc):
-                raise
-            last = exc
-    raise last
 
 
 @dataclass

@@ -28,7 +28,8 @@ import numpy as np
 
 from airspace_sim.avoidance import resume_heading_change
 from airspace_sim.avoidance.bands import CLEAR_TOLERANCE, cpa_min_ratio
-from airspace_sim.world.control import Encounters, build_resolver, gather, reachable
+from airspace_sim.avoidance.resolvers import build_resolver
+from airspace_sim.world.control import Encounters, gather, reachable
 
 #: rad: an autopilot turn smaller than this per step is "on course" (a route autopilot's
 #: atan2 gives ~1e-16 rad/s on a straight leg, which must not count as turning back)
@@ -62,11 +63,13 @@ class AvoidancePolicy:
 
     def __init__(self, scenario, dt: float, avoid, tracking):
         spec = scenario.resolver
-        self.resolver = build_resolver(scenario, dt)
+        self.resolver = build_resolver(scenario)
         self.dt = float(dt)
-        self.r_safe = float(scenario.separation.r_safe)
-        self.lookahead_s = float(spec.lookahead)
-        self.margin = float(spec.margin)
+        # the resolver's geometry: the scenario's, unless resolver.params overrides it
+        given = spec.params
+        self.r_safe = float(given.get("r_safe", scenario.separation.r_safe))
+        self.lookahead_s = float(given.get("lookahead_s", spec.lookahead))
+        self.margin = float(given.get("margin", spec.margin))
         self.search_range = math.radians(float(spec.search_deg))
         self.resume_margin = float(spec.resume_margin)
         self.resume_decay_s = None if spec.resume_decay_s is None else float(spec.resume_decay_s)

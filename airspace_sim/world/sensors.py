@@ -3,15 +3,9 @@
 *Who is in range* comes from the pymunk space (:mod:`.bodies`, RANGE circles of radius
 ``range/2``: two overlap exactly when the aircraft are closer than ``range``); a sensor
 only decides, for each (owner, intruder) pair in range, whether it is detected on this scan
-and what it reports. Registered as ``"radar"``.
-
-Interface (plugins implement the same)::
-
-    factory(spec: SensorSpec, dt: float) -> sensor
-    sensor.period_steps -> int       # world steps between scans (≥ 1)
-    sensor.scans(step) -> bool       # does a scan happen at world step index ``step``
-    sensor.measure(owner (P,), intruder (P,), positions (N, 2), pair_keys (P,) uint64, step)
-        -> (z (P, 2) m world-frame positions, detected (P,) bool)
+and what it reports. Registered as ``"radar"``, a class fitting :class:`airspace_sim.parts.Sensor` (constructed
+as ``cls(spec, dt, params)``; methods, shapes and units there). Its settings are validated
+by the scenario loader (``sensor.*``), which the sensor trusts.
 
 Measurements are intruder positions in WORLD coordinates (the ownship knows where it is),
 so trackers work in the world frame and the ownship's own turns are never mistaken for the
@@ -22,29 +16,22 @@ from __future__ import annotations
 
 import numpy as np
 
-from airspace_sim.errors import UserError
+from airspace_sim.parts import NoParams, Sensor
 from airspace_sim.registry import register
 from airspace_sim.scenarios.schema import SensorSpec
 from airspace_sim.world import streams
 
 
-class Radar:
+@register("sensor", "radar")
+class Radar(Sensor):
     """Position-only sensor: ``z = p_intruder + w``, ``w ~ N(0, σ² I₂)``; each pair in range
     detected with probability ``detection_probability`` per scan; one scan every ``period``
-    seconds (rounded to whole world steps). Random numbers are counter-based per pair and
+    seconds (a whole number of world steps). Random numbers are counter-based per pair and
     step (:mod:`.streams`), so they do not depend on which other pairs exist."""
 
-    def __init__(self, spec: SensorSpec, dt: float):
-        if not (spec.sigma >= 0 and np.isfinite(spec.sigma)):
-            raise UserError(
-                f"sensor.sigma: must be a non-negative number of metres, got {spec.sigma!r}"
-            )
-        if not (0.0 <= spec.detection_probability <= 1.0):
-            raise UserError(
-                f"sensor.detection_probability: must be in [0, 1], got {spec.detection_probability!r}"
-            )
-        if not (spec.period > 0):
-            raise UserError(f"sensor.period: must be positive seconds, got {spec.period!r}")
+    Params = NoParams
+
+    def __init__(self, spec: SensorSpec, dt: float, params=None):
         self.sigma = float(spec.sigma)
         self.pd = float(spec.detection_probability)
         self.period_steps = max(1, round(spec.period / dt))
@@ -63,6 +50,3 @@ class Radar:
             z[:, 0] += self.sigma * streams.normal(pair_keys, streams.NOISE_X, step)
             z[:, 1] += self.sigma * streams.normal(pair_keys, streams.NOISE_Y, step)
         return z, detected
-
-
-register("sensor", "radar")(Radar)

@@ -99,7 +99,6 @@ class World:
         self.r_safe = float(sc.separation.r_safe)
         self.nmac_distance = float(sc.separation.nmac)
         self.sensor_range = float(sc.sensor.range)
-        self.lookahead = float(sc.resolver.lookahead)
 
         # parts
         self.keys = streams.aircraft_keys(self.seed, n)
@@ -113,14 +112,17 @@ class World:
             members = np.array(
                 [i for i, a in enumerate(self.specs) if a.autopilot == name], dtype=np.int64
             )
-            ap = registry.get("autopilot", name)(members, [self.specs[i] for i in members], ctx)
+            specs = [self.specs[i] for i in members]
+            ap = registry.build("autopilot", name, members, specs, ctx, params=None)
             self.autopilots.append((members, ap))
         self.modes = np.full(n, -1, dtype=np.int64)
         self._has_plan = np.zeros(n, dtype=bool)
         for members, ap in self.autopilots:
             self._has_plan[members] = ap.has_plan
         self._read_modes()
-        self.sensor = registry.get("sensor", sc.sensor.kind)(sc.sensor, dt)
+        self.sensor = registry.build(
+            "sensor", sc.sensor.kind, sc.sensor, dt, params=sc.sensor.params
+        )
         self.tracker_preset = presets.get(sc.tracker.model, dt=dt)
         self.tracks = TrackTable(
             n,
@@ -132,6 +134,7 @@ class World:
         )
         self.trackers_on = self.controlled | self.avoid  # ownships that track intruders
         self.policy = AvoidancePolicy(sc, dt, self.avoid & ~self.controlled, self.trackers_on)
+        self.lookahead = self.policy.lookahead_s
         self.metrics_acc = WorldMetrics(n, self.r_safe, self.nmac_distance, dt)
         self.airspace = Airspace(self.positions, self.r_safe, self.nmac_distance, self.sensor_range)
         self.in_los = np.zeros(n, dtype=bool)
