@@ -283,7 +283,7 @@ def initial_covariance(cfg: EncounterConfig) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- metrics
-class Metrics:
+class EncounterMetrics:
     """Per-encounter accumulators (B,) for one tracker/frame."""
 
     def __init__(self, B: int, r_safe: float):
@@ -532,7 +532,7 @@ def run_relative(
     x_est0 = x + np.einsum("ij,bj->bi", np.linalg.cholesky(P0), draws["e0"])
     imm = make_imm(preset, x_est0, P0, preset.mu0())
 
-    met = Metrics(B, cfg.r_safe)
+    met = EncounterMetrics(B, cfg.r_safe)
     trk = TrackerMetrics(B)
     active = np.ones(B, dtype=bool)
     last_turn = np.full(B, -(10**9), dtype=np.int64)

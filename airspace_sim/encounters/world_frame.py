@@ -38,7 +38,7 @@ from airspace_sim.encounters.relative import (
     VEL,
     EncounterBatch,
     EncounterConfig,
-    Metrics,
+    EncounterMetrics,
     TrackerMetrics,
     _oracle_choice,
     _recent,
@@ -144,7 +144,7 @@ def run_world(
     imm_w = make_imm(preset, est_w0, P0, preset.mu0())
     imm_r = make_imm(preset, est_r0, P0, preset.mu0())
 
-    met = Metrics(B, cfg.r_safe)
+    met = EncounterMetrics(B, cfg.r_safe)
     trk_w, trk_r = TrackerMetrics(B), TrackerMetrics(B)
     active = np.ones(B, dtype=bool)
     last_turn = np.full(B, -(10**9), dtype=np.int64)
