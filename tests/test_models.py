@@ -157,7 +157,7 @@ def test_ct_trajectory_closes_circle_of_radius_v_over_w(w, v):
 
 
 def test_paper_literal_A2_is_not_self_consistent_and_ours_is():
-    """The paper's printed A2 has a sign error in row 3 (seed-model.md §1)."""
+    """The paper's printed A2 has a sign error in row 3 (docs/paper-notes.md §1)."""
     w, T, h = math.pi / 4, 0.1, 1e-6
     paper = lambda t: paper_literal_A2(w, t)  # noqa: E731
     ours = lambda t: transition(w, t)  # noqa: E731

@@ -1,4 +1,4 @@
-"""Multi-intruder heading bands (DAIDALUS-style; ``shared/design/anchors.md``).
+"""Multi-intruder heading bands (DAIDALUS-style: NASA DAIDALUS heading bands).
 
 For each ownship ``n`` (``N`` of them) with ``K`` intruder slots, candidate heading changes
 ``ψ`` within ``±max_heading_change[n]`` are scored by the closest point of approach (CPA)

@@ -1,4 +1,4 @@
-"""The paper's escape angle (paper §V, Figure 3; ``shared/design/seed-model.md`` §3).
+"""The paper's escape angle (paper §V, Figure 3; ``docs/paper-notes.md`` §3).
 
 Relative frame: ownship ``O`` at the origin, intruder estimate ``B`` (the relative position),
 per-step displacement ``Δ = v_rel·ΔT``. The predicted points are ``C_j = B + jΔ`` for
@@ -20,7 +20,7 @@ Conventions (deliberate, tested in ``tests/test_escape_angle.py``):
   ``θ`` rotates vectors in it by ``−θ``, so for ``γ > 0`` the two agree up to that sign. For
   ``γ < 0`` the paper's formula read literally crosses the line of sight to the far tangent;
   here the magnitude is always ``β − |γ|`` (the nearer tangent, on the side the track
-  already passes), as ``seed-model.md`` §3 specifies.
+  already passes), as ``docs/paper-notes.md`` §3 specifies.
 - **Head-on** (``|γ| ≤ HEAD_ON_TOLERANCE``, including exactly ``γ = 0``): the ownship turns
   right, i.e. clockwise. For a static intruder ``v_rel = −v_own``, so rotating the ownship
   velocity by ``ψ`` rotates ``v_rel`` by the same ``ψ``; a right (clockwise) ownship turn is

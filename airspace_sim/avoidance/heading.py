@@ -1,4 +1,4 @@
-"""World-frame exact heading changes (``shared/design/seed-model.md`` §3, last paragraph).
+"""World-frame exact heading changes (``docs/paper-notes.md`` §3, last paragraph).
 
 The paper (§V) rotates the *relative* velocity by ``θ``. A real ownship can only turn its own
 velocity at constant speed: with ``v_rel(ψ) = v_i − R(ψ)·v_o`` the relative velocities it can

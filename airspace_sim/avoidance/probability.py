@@ -1,4 +1,4 @@
-"""Conflict probability from the IMM's mode mixture (``seed-model.md`` §3, weakness 2).
+"""Conflict probability from the IMM's mode mixture (``docs/paper-notes.md`` §3, weakness 2).
 
 The paper (§VI, assumption 4) notes that its prediction ignores that a forecast grows less
 certain the further ahead it looks. The IMM gives, for each pair, mode-conditioned predicted

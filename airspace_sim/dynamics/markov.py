@@ -1,7 +1,7 @@
 """The mode chain: transition matrix Π, per step or from sojourn times (paper §II).
 
 ``Π[i, j] = Pr(q(k+1) = j | q(k) = i)``: rows sum to one (the paper's "sum over i" is a
-typo, see ``shared/design/seed-model.md`` §1). A per-step Π silently depends on ΔT, so a
+typo, see ``docs/paper-notes.md`` §1). A per-step Π silently depends on ΔT, so a
 scenario can give mean sojourn times in seconds instead: with the generator matrix
 ``Λ`` (``Λ[i, i] = −1/τ_i``, ``Λ[i, j] = p_ij/τ_i`` off the diagonal), ``Π(ΔT) = expm(Λ ΔT)``.
 """

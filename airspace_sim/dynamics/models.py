@@ -4,7 +4,7 @@
 ``Ω`` the turn rate in rad/s. Turn rates are counter-clockwise positive (left turns).
 
 The paper's ``A2``/``A3`` are the coordinated-turn (CT) transition with a known turn rate,
-but its third row has a sign error (see ``shared/design/seed-model.md`` §1). Here the
+but its third row has a sign error (see ``docs/paper-notes.md`` §1). Here the
 standard, self-consistent CT matrix is used (Bar-Shalom, Li & Kirubarajan 2001, §11.7):
 velocity rotates by ``ωΔT`` and position integrates the rotating velocity. The
 constant-velocity (CV) matrix ``A1`` is its ``ω → 0`` limit, which :func:`transition`

@@ -4,7 +4,7 @@ A :class:`Preset` holds everything needed to generate truth (:mod:`.truth`) and 
 matched IMM (:meth:`Preset.imm_arguments`): time step, per-mode turn rates, mode chain,
 process and measurement noise, initial speeds. Presets differ only in their numbers.
 
-- ``seed``: the paper's numbers as ``shared/design/seed-model.md`` reads them: ΔT = 0.1 s,
+- ``seed``: the paper's numbers as ``docs/paper-notes.md`` reads them: ΔT = 0.1 s,
   modes (straight, left, right) with ω = π/4 rad/s, the paper's Π per step, ``Q = v``
   (§VI), ``R = 50² I``, speeds in [V_cruise, 2 V_cruise], V_cruise = 285.841 m/s.
 - ``realistic``: ΔT = 1 s, standard-rate 3°/s turns, white-noise-acceleration Q, mode
@@ -225,7 +225,7 @@ def _tup(a) -> tuple:
 
 
 def seed() -> Preset:
-    """The paper's numbers (§II, §VI) as ``seed-model.md`` reads them."""
+    """The paper's numbers (§II, §VI) as ``docs/paper-notes.md`` reads them."""
     Pi = [[0.8, 0.1, 0.1], [0.19, 0.8, 0.01], [0.19, 0.01, 0.8]]
     Q = models.paper_process_noise()
     return Preset(

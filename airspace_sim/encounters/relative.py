@@ -1,4 +1,4 @@
-"""The paper's encounter in its relative frame (paper §V–VII, ``seed-model.md`` §3).
+"""The paper's encounter in its relative frame (paper §V–VII, ``docs/paper-notes.md`` §3).
 
 The ownship sits at the origin of a frame that moves with it; the state of the intruder is
 its position and velocity *relative* to the ownship, ``[x, vx, y, vy, Ω]`` (m, m/s, rad/s).
@@ -21,7 +21,7 @@ diag(σ², σ_v², σ², σ_v², σ_Ω²) with σ = the measurement σ, σ_v = `
 
 Avoidance, literally as the paper does it (§V): every step, the resolver looks at the IMM
 estimate; on a predicted conflict the ownship "rotates the coordinate frame" by θ, which in
-this frame rotates the intruder's **true relative velocity** by θ (``seed-model.md`` §3).
+this frame rotates the intruder's **true relative velocity** by θ (``docs/paper-notes.md`` §3).
 The tracker is *not* told: to it the rotation is an unmodelled manoeuvre of the intruder,
 which is exactly the paper's false mode-2 detection near t = 10 s (§VII).
 

@@ -1,4 +1,4 @@
-"""Encounters in the world frame: the ownship moves and can only turn (``seed-model.md`` §3).
+"""Encounters in the world frame: the ownship moves and can only turn (``docs/paper-notes.md`` §3).
 
 Differences from the paper's relative frame (:mod:`.relative`):
 

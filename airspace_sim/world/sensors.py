@@ -9,7 +9,7 @@ by the scenario loader (``sensor.*``), which the sensor trusts.
 
 Measurements are intruder positions in WORLD coordinates (the ownship knows where it is),
 so trackers work in the world frame and the ownship's own turns are never mistaken for the
-intruder's (``shared/design/seed-model.md`` §3, weakness 1).
+intruder's (``docs/paper-notes.md`` §3, weakness 1).
 """
 
 from __future__ import annotations
