@@ -239,7 +239,7 @@ class Resolver(ABC):
     #: :meth:`resolve` uses ``turn_rate`` (judges heading changes as flown)
     uses_turn_rate: ClassVar[bool] = False
     #: the advice is "no turn, no conflict" exactly when the current heading passes the CPA
-    #: test :func:`airspace_sim.avoidance.bands.cpa_min_ratio` with the resolver's
+    #: test :func:`airspace_sim.avoidance.cpa.cpa_min_ratio` with the resolver's
     #: ``params.r_safe``, ``params.lookahead_s`` and ``params.margin`` (so the world runs
     #: it only on the ownships that fail it)
     prefilter: ClassVar[bool] = False

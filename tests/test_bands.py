@@ -6,7 +6,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from airspace_sim.avoidance import band_search, resume_heading_change, tangent_heading_change
-from airspace_sim.avoidance.bands import CLEAR_TOLERANCE, cpa_min_ratio
+from airspace_sim.avoidance.bands import CLEAR_TOLERANCE
+from airspace_sim.avoidance.cpa import cpa_min_ratio
 from airspace_sim.geometry import rotate
 
 R = 3000.0
@@ -309,7 +310,7 @@ def test_resume():
 
 
 def test_kernel_equals_numpy_reference():
-    from airspace_sim.avoidance.bands import cpa_min_ratio_numpy
+    from airspace_sim.avoidance.cpa import cpa_min_ratio_numpy
 
     rng = np.random.default_rng(11)
     vo, r, v, valid = random_scene(rng, 9, 5)
@@ -362,7 +363,7 @@ def _flown_min_ratio(vo, r, v, valid, psi, radius, T, w, steps=24001):
 
 
 def test_turning_cpa_instantaneous_rate_is_plain_cpa():
-    from airspace_sim.avoidance.bands import cpa_min_ratio_turning
+    from airspace_sim.avoidance.cpa import cpa_min_ratio_turning
 
     rng = np.random.default_rng(3)
     vo, r, v, valid = random_scene(rng, 20, 6)
@@ -374,7 +375,7 @@ def test_turning_cpa_instantaneous_rate_is_plain_cpa():
 
 
 def test_turning_cpa_matches_dense_flown_trajectory():
-    from airspace_sim.avoidance.bands import cpa_min_ratio_turning
+    from airspace_sim.avoidance.cpa import cpa_min_ratio_turning
 
     rng = np.random.default_rng(4)
     w = np.radians(3.0)
@@ -398,7 +399,7 @@ def test_band_search_with_turn_rate_sees_the_turn_path():
     v = -vo[:, None, :]  # stationary intruder
     valid = np.ones((1, 1), bool)
     psi = np.array([[-np.pi / 2]])
-    from airspace_sim.avoidance.bands import cpa_min_ratio_turning
+    from airspace_sim.avoidance.cpa import cpa_min_ratio_turning
 
     inst = cpa_min_ratio(vo, r, v, valid, psi, R, 120.0)[0, 0]
     flown = cpa_min_ratio_turning(vo, r, v, valid, psi, R, 120.0, np.radians(3.0))[0, 0]

@@ -15,10 +15,12 @@ and (``exact_candidates=True``) the exact boundaries of each intruder's clear se
 :mod:`airspace_sim.avoidance.heading` with radius ``r_safe·(1 + margin)``: both tangents
 (CPA inside the look-ahead) and ``d(T) = radius`` (CPA at the end of the look-ahead).
 
-Choice: the clear candidate of smallest ``|ψ|``; ties go to the right turn (``ψ < 0``), then to
-the lower candidate index (optionally left turns rank as ``|ψ| + left_penalty``). If none is clear, the candidate that maximises the minimum over
-intruders of ``d / (r_safe·(1+margin))`` (for one common radius: of the CPA distance), tie-broken
-the same way. Angles radians CCW positive, distances metres, times seconds.
+Choice: the clear candidate of smallest ``|ψ|``; ties go to the right turn (``ψ < 0``), then
+to the lower candidate index (optionally left turns rank as ``|ψ| + left_penalty``). If none
+is clear, the candidate that maximises the minimum over intruders of
+``d / (r_safe·(1+margin))`` (for one common radius: of the CPA distance), tie-broken the same
+way. The CPA arithmetic and its search kernels are in :mod:`.cpa`. Angles radians CCW
+positive, distances metres, times seconds.
 """
 
 from __future__ import annotations
@@ -26,8 +28,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
+from airspace_sim.avoidance.cpa import (
+    best_blocked_search,
+    first_clear_search,
+    cpa_min_ratio,
+    cpa_min_ratio_turning,
+)
 from airspace_sim.avoidance.heading import (
     range_at_time_heading_changes,
     tangent_heading_changes,
@@ -72,333 +79,12 @@ class BandResult:
 RIGHT_OR_AHEAD, LEFT_OR_AHEAD, STRICT_RIGHT = 0, 1, 2
 
 
-def cpa_min_ratio(own_velocity, rel_position, rel_velocity, valid, candidates, radius, lookahead_s):
-    """Minimum over intruders of (CPA distance over ``[0, T]``) / radius, per candidate.
-
-    A fused numba kernel (:func:`_cpa_kernel`) evaluates the ``(N, C, K)`` arithmetic without
-    temporaries; :func:`cpa_min_ratio_numpy` is the same formula in numpy (the reference).
-
-    Parameters
-    ----------
-    own_velocity : (N, 2) m/s; rel_position : (N, K, 2) m; rel_velocity : (N, K, 2) m/s
-        (intruder minus ownship, world frame, at the current heading).
-    valid : (N, K) bool, intruder slot in use.
-    candidates : (N, C) heading changes, rad (NaN allowed: gives NaN rows).
-    radius : float or (N, K) array, m (the clear distance ``r_safe·(1+margin)``).
-    lookahead_s : float, T in seconds.
-
-    Returns
-    -------
-    (N, C) array; ``inf`` where the ownship has no valid intruder.
-    """
-    vo = np.ascontiguousarray(own_velocity, dtype=float)
-    valid = np.ascontiguousarray(valid, dtype=bool)
-    r = np.ascontiguousarray(rel_position, dtype=float)
-    v = np.ascontiguousarray(rel_velocity, dtype=float)
-    psi = np.ascontiguousarray(candidates, dtype=float)
-    radius = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, dtype=float), valid.shape))
-    return _cpa_kernel(vo, r, v, valid, psi, radius, float(lookahead_s))
-
-
-def cpa_min_ratio_numpy(
-    own_velocity, rel_position, rel_velocity, valid, candidates, radius, lookahead_s
-):
-    """:func:`cpa_min_ratio` in plain numpy, arrays ``(N, C, K)`` (reference for the kernel)."""
-    vo = np.asarray(own_velocity, dtype=float)
-    valid = np.asarray(valid, dtype=bool)
-    r = np.where(valid[..., None], np.asarray(rel_position, dtype=float), 0.0)
-    vrel0 = np.where(valid[..., None], np.asarray(rel_velocity, dtype=float), 0.0)
-    psi = np.asarray(candidates, dtype=float)
-    if valid.shape[-1] == 0:
-        return np.full(psi.shape, np.inf)
-    radius = np.broadcast_to(np.asarray(radius, dtype=float), valid.shape)
-    with np.errstate(divide="ignore"):
-        inv_r2 = (1.0 / (radius * radius))[:, None, :]  # (N, 1, K)
-    vi = vrel0 + vo[:, None, :]  # (N, K, 2) intruder world velocity
-    c, s = np.cos(psi), np.sin(psi)  # (N, C)
-    rvx = (c * vo[:, 0:1] - s * vo[:, 1:2])[:, :, None]  # (N, C, 1)
-    rvy = (s * vo[:, 0:1] + c * vo[:, 1:2])[:, :, None]
-    rx, ry = r[:, None, :, 0], r[:, None, :, 1]  # (N, 1, K)
-    r2 = rx * rx + ry * ry
-    # (N, C, K) arrays, updated in place: relative velocity, r·v, |v|², t_cpa, d²
-    vx = vi[:, None, :, 0] - rvx
-    vy = vi[:, None, :, 1] - rvy
-    dot = vx * rx
-    dot += vy * ry
-    vx *= vx
-    vy *= vy
-    v2 = vx
-    v2 += vy
-    t = np.negative(dot)
-    t /= np.maximum(v2, 1e-300)  # v = 0 has r·v = 0: t = 0
-    np.clip(t, 0.0, lookahead_s, out=t)
-    # d² = |r + t v|² = r² + t (2 r·v + t |v|²)
-    v2 *= t
-    dot *= 2.0
-    v2 += dot
-    v2 *= t
-    v2 += r2
-    np.maximum(v2, 0.0, out=v2)
-    v2 *= inv_r2
-    np.copyto(v2, np.inf, where=~valid[:, None, :])
-    return np.sqrt(v2.min(axis=-1))
-
-
-@njit(cache=True, error_model="numpy")
-def _cpa_kernel(vo, r, v, valid, psi, radius, lookahead_s):  # pragma: no cover - compiled
-    """Fused loop over ``(n, c, k)`` of :func:`cpa_min_ratio_numpy`'s formula, same operations."""
-    n_own, n_cand = psi.shape
-    n_int = valid.shape[1]
-    out = np.full((n_own, n_cand), np.inf)
-    for n in range(n_own):
-        for c in range(n_cand):
-            if np.isnan(psi[n, c]) and n_int > 0:
-                out[n, c] = np.nan
-                continue
-            cs, sn = np.cos(psi[n, c]), np.sin(psi[n, c])
-            rvx = cs * vo[n, 0] - sn * vo[n, 1]
-            rvy = sn * vo[n, 0] + cs * vo[n, 1]
-            best = np.inf
-            for k in range(n_int):
-                if not valid[n, k]:
-                    continue
-                rx, ry = r[n, k, 0], r[n, k, 1]
-                vx = (v[n, k, 0] + vo[n, 0]) - rvx
-                vy = (v[n, k, 1] + vo[n, 1]) - rvy
-                dot = vx * rx + vy * ry
-                v2 = vx * vx + vy * vy
-                t = -dot / max(v2, 1e-300)
-                t = min(max(t, 0.0), lookahead_s)
-                d2 = (t * v2 + 2.0 * dot) * t + (rx * rx + ry * ry)
-                ratio2 = max(d2, 0.0) * (1.0 / (radius[n, k] * radius[n, k]))
-                best = min(best, ratio2)
-            out[n, c] = np.sqrt(best)
-    return out
-
-
-@njit(cache=True, error_model="numpy")
-def _first_clear_kernel(
-    vo, r, v, valid, psi, usable, radius, lookahead_s, threshold
-):  # pragma: no cover
-    """Per ownship, the first clear candidate of each side (columns of ``first_clear``).
-
-    ``psi`` (N, C) sorted by preference. Each candidate is tested with the same arithmetic
-    as :func:`_cpa_kernel`, intruder by intruder, stopping at the first one closer than
-    ``threshold`` (the last blocking intruder is tried first: neighbouring candidates are
-    usually blocked by the same one); the scan of an ownship stops once every side has a
-    clear candidate. So the work is about the blocked candidates before the first clear
-    ones, not C·K.
-    """
-    n_own, n_cand = psi.shape
-    n_int = valid.shape[1]
-    out = np.full((n_own, 3), -1, dtype=np.int64)
-    for n in range(n_own):
-        blocker = -1
-        for c in range(n_cand):
-            if not usable[n, c]:
-                continue
-            p = psi[n, c]
-            want = (
-                (p <= 0.0 and out[n, 0] < 0)
-                or (p >= 0.0 and out[n, 1] < 0)
-                or (p < 0.0 and out[n, 2] < 0)
-            )
-            if not want:
-                if out[n, 0] >= 0 and out[n, 1] >= 0 and out[n, 2] >= 0:
-                    break
-                continue
-            cs, sn = np.cos(p), np.sin(p)
-            rvx = cs * vo[n, 0] - sn * vo[n, 1]
-            rvy = sn * vo[n, 0] + cs * vo[n, 1]
-            clear = True
-            for j in range(-1, n_int):
-                k = blocker if j < 0 else j
-                if k < 0 or (j >= 0 and k == blocker) or not valid[n, k]:
-                    continue
-                rx, ry = r[n, k, 0], r[n, k, 1]
-                vx = (v[n, k, 0] + vo[n, 0]) - rvx
-                vy = (v[n, k, 1] + vo[n, 1]) - rvy
-                dot = vx * rx + vy * ry
-                v2 = vx * vx + vy * vy
-                t = -dot / max(v2, 1e-300)
-                t = min(max(t, 0.0), lookahead_s)
-                d2 = (t * v2 + 2.0 * dot) * t + (rx * rx + ry * ry)
-                ratio2 = max(d2, 0.0) * (1.0 / (radius[n, k] * radius[n, k]))
-                if not (np.sqrt(ratio2) >= threshold):
-                    clear = False
-                    blocker = k
-                    break
-            if clear:
-                if p <= 0.0 and out[n, 0] < 0:
-                    out[n, 0] = c
-                if p >= 0.0 and out[n, 1] < 0:
-                    out[n, 1] = c
-                if p < 0.0 and out[n, 2] < 0:
-                    out[n, 2] = c
-    return out
-
-
-@njit(cache=True, error_model="numpy")
-def _best_blocked_kernel(
-    vo, r, v, valid, psi, usable, radius, lookahead_s, rows, side
-):  # pragma: no cover
-    """For ownship ``rows[i]``, the candidate on side ``side[i]`` (0: ψ ≤ 0, 1: ψ ≥ 0) of
-    largest minimum CPA ratio (the first in order among equals): a max-min search that
-    stops evaluating a candidate once its running minimum cannot beat the best so far.
-    Same arithmetic as :func:`_cpa_kernel`, so the same choice as the full evaluation."""
-    n_int = valid.shape[1]
-    n_cand = psi.shape[1]
-    out = np.full(rows.size, -1, dtype=np.int64)
-    for i in range(rows.size):
-        n = rows[i]
-        best = -np.inf
-        blocker = -1
-        for c in range(n_cand):
-            if not usable[n, c]:
-                continue
-            p = psi[n, c]
-            if (side[i] == 0 and p > 0.0) or (side[i] == 1 and p < 0.0):
-                continue
-            cs, sn = np.cos(p), np.sin(p)
-            rvx = cs * vo[n, 0] - sn * vo[n, 1]
-            rvy = sn * vo[n, 0] + cs * vo[n, 1]
-            m = np.inf
-            arg = -1
-            for j in range(-1, n_int):
-                k = blocker if j < 0 else j
-                if k < 0 or (j >= 0 and k == blocker) or not valid[n, k]:
-                    continue
-                rx, ry = r[n, k, 0], r[n, k, 1]
-                vx = (v[n, k, 0] + vo[n, 0]) - rvx
-                vy = (v[n, k, 1] + vo[n, 1]) - rvy
-                dot = vx * rx + vy * ry
-                v2 = vx * vx + vy * vy
-                t = -dot / max(v2, 1e-300)
-                t = min(max(t, 0.0), lookahead_s)
-                d2 = (t * v2 + 2.0 * dot) * t + (rx * rx + ry * ry)
-                q = np.sqrt(max(d2, 0.0) * (1.0 / (radius[n, k] * radius[n, k])))
-                if q < m:
-                    m = q
-                    arg = k
-                if m <= best:
-                    break
-            if m > best:
-                best = m
-                out[i] = c
-                blocker = arg
-    return out
-
-
 def first_clear_from_band(candidates, band):
     """(N, 3) :attr:`BandResult.first_clear` from a full ``band`` (N, C)."""
     out = np.full((band.shape[0], 3), -1, dtype=np.int64)
     for col, mask in enumerate((candidates <= 0, candidates >= 0, candidates < 0)):
         ok = band & mask
         out[:, col] = np.where(ok.any(axis=1), np.argmax(ok, axis=1), -1)
-    return out
-
-
-#: Largest heading change, rad, flown along one straight chord when the turn is modelled
-#: (:func:`cpa_min_ratio_turning`): 15° (the chord's sagitta at 230 m/s and 3°/s is ≈ 40 m).
-TURN_SEGMENT = float(np.radians(15.0))
-
-
-def cpa_min_ratio_turning(
-    own_velocity,
-    rel_position,
-    rel_velocity,
-    valid,
-    candidates,
-    radius,
-    lookahead_s,
-    turn_rate,
-    segment=TURN_SEGMENT,
-):
-    """:func:`cpa_min_ratio` with the ownship turning at ``turn_rate`` until ``ψ`` is reached.
-
-    The ownship flies an arc of radius ``|v_o|/ω`` from its current heading to ``heading + ψ``
-    (taking ``|ψ|/ω`` seconds), then straight; the intruder flies straight. The arc is
-    replaced by chords of at most ``segment`` rad whose end points lie on it, so the relative
-    track is piecewise straight and the minimum distance over ``[0, T]`` is the minimum of
-    each piece's clamped CPA. ``turn_rate`` (N,) rad/s (``inf`` or ≤ 0: instantaneous, the
-    same numbers as :func:`cpa_min_ratio`).
-    """
-    vo = np.ascontiguousarray(own_velocity, dtype=float)
-    valid = np.ascontiguousarray(valid, dtype=bool)
-    r = np.ascontiguousarray(rel_position, dtype=float)
-    v = np.ascontiguousarray(rel_velocity, dtype=float)
-    psi = np.ascontiguousarray(candidates, dtype=float)
-    radius = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, dtype=float), valid.shape))
-    w = np.ascontiguousarray(np.broadcast_to(np.asarray(turn_rate, dtype=float), (vo.shape[0],)))
-    return _cpa_turn_kernel(vo, r, v, valid, psi, radius, float(lookahead_s), w, float(segment))
-
-
-@njit(cache=True, error_model="numpy")
-def _seg_min(rx, ry, vx, vy, t0, t1):  # pragma: no cover - compiled
-    """min over t in [0, t1 − t0] of |r + t v|² (r at the segment start)."""
-    dot = vx * rx + vy * ry
-    v2 = vx * vx + vy * vy
-    t = -dot / max(v2, 1e-300)
-    t = min(max(t, 0.0), t1 - t0)
-    return max((t * v2 + 2.0 * dot) * t + (rx * rx + ry * ry), 0.0)
-
-
-@njit(cache=True, error_model="numpy")
-def _cpa_turn_kernel(vo, r, v, valid, psi, radius, lookahead_s, w, segment):  # pragma: no cover
-    n_own, n_cand = psi.shape
-    n_int = valid.shape[1]
-    out = np.full((n_own, n_cand), np.inf)
-    pts_t = np.empty(64)
-    pts_x = np.empty(64)
-    pts_y = np.empty(64)
-    for n in range(n_own):
-        speed = np.hypot(vo[n, 0], vo[n, 1])
-        h0 = np.arctan2(vo[n, 1], vo[n, 0])
-        for c in range(n_cand):
-            p = psi[n, c]
-            if np.isnan(p) and n_int > 0:
-                out[n, c] = np.nan
-                continue
-            # ownship break points (time, displacement) along the arc, then the end velocity
-            tau = abs(p) / w[n] if (w[n] > 0.0 and np.isfinite(w[n])) else 0.0
-            tau = min(tau, lookahead_s)
-            m = 0
-            if tau > 0.0:
-                m = min(int(np.ceil(abs(p) / segment - 1e-9)), 62)
-                m = max(m, 1)
-            sgn = 1.0 if p > 0 else -1.0
-            pts_t[0], pts_x[0], pts_y[0] = 0.0, 0.0, 0.0
-            for j in range(1, m + 1):
-                tj = tau * j / m
-                if w[n] > 0.0 and np.isfinite(w[n]):
-                    rad = speed / w[n]
-                    hj = h0 + sgn * w[n] * tj
-                    pts_x[j] = sgn * rad * (np.sin(hj) - np.sin(h0))
-                    pts_y[j] = sgn * rad * (np.cos(h0) - np.cos(hj))
-                pts_t[j] = tj
-            cs, sn = np.cos(h0 + p), np.sin(h0 + p)
-            ovx, ovy = speed * cs, speed * sn  # velocity after the turn
-            best = np.inf
-            for k in range(n_int):
-                if not valid[n, k]:
-                    continue
-                vix = v[n, k, 0] + vo[n, 0]
-                viy = v[n, k, 1] + vo[n, 1]
-                d2 = np.inf
-                for j in range(m):
-                    t0, t1 = pts_t[j], pts_t[j + 1]
-                    ax = r[n, k, 0] + vix * t0 - pts_x[j]
-                    ay = r[n, k, 1] + viy * t0 - pts_y[j]
-                    bx = r[n, k, 0] + vix * t1 - pts_x[j + 1]
-                    by = r[n, k, 1] + viy * t1 - pts_y[j + 1]
-                    dt = t1 - t0
-                    d2 = min(d2, _seg_min(ax, ay, (bx - ax) / dt, (by - ay) / dt, t0, t1))
-                ts = pts_t[m]
-                ax = r[n, k, 0] + vix * ts - pts_x[m]
-                ay = r[n, k, 1] + viy * ts - pts_y[m]
-                d2 = min(d2, _seg_min(ax, ay, vix - ovx, viy - ovy, ts, lookahead_s))
-                best = min(best, d2 * (1.0 / (radius[n, k] * radius[n, k])))
-            out[n, c] = np.sqrt(best)
     return out
 
 
@@ -526,7 +212,7 @@ def band_search(
             np.ascontiguousarray(np.broadcast_to(radius, valid.shape)),
             float(lookahead_s),
         )
-        first = _first_clear_kernel(*args, 1.0 - CLEAR_TOLERANCE)
+        first = first_clear_search(*args, 1.0 - CLEAR_TOLERANCE)
         best = np.full((n, 2), -1, dtype=np.int64)
         blocked = first[:, :2] < 0
         blocked &= np.stack(
@@ -534,7 +220,7 @@ def band_search(
         )
         who, col = np.nonzero(blocked)
         if who.size:
-            best[who, col] = _best_blocked_kernel(*args, who.astype(np.int64), col.astype(np.int64))
+            best[who, col] = best_blocked_search(*args, who.astype(np.int64), col.astype(np.int64))
     right, left = first[:, RIGHT_OR_AHEAD], first[:, LEFT_OR_AHEAD]
     first_any = np.where(right < 0, left, np.where(left < 0, right, np.minimum(right, left)))
     # nothing clear: the better of the two sides' best (the earlier one among equals)

@@ -27,7 +27,8 @@ import math
 import numpy as np
 
 from airspace_sim.avoidance import resume_heading_change
-from airspace_sim.avoidance.bands import CLEAR_TOLERANCE, cpa_min_ratio
+from airspace_sim.avoidance.bands import CLEAR_TOLERANCE
+from airspace_sim.avoidance.cpa import cpa_min_ratio
 from airspace_sim.avoidance.resolvers import build_resolver
 from airspace_sim.world.control import Encounters, gather, reachable
 
