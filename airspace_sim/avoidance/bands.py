@@ -31,9 +31,9 @@ import numpy as np
 
 from airspace_sim.avoidance.cpa import (
     best_blocked_search,
-    first_clear_search,
     cpa_min_ratio,
     cpa_min_ratio_turning,
+    first_clear_search,
 )
 from airspace_sim.avoidance.heading import (
     range_at_time_heading_changes,
