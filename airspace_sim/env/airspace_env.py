@@ -220,9 +220,8 @@ class AirspaceParallelEnv(ParallelEnv):
 
     def _n_modes(self) -> int:
         tr = getattr(self.world, "tracks", None)
-        mu = getattr(tr, "mu", None)
-        if mu is not None and np.ndim(mu) == 2 and np.shape(mu)[1] > 0:
-            return int(np.shape(mu)[1])
+        if tr is not None:
+            return int(tr.n_modes)
         from airspace_sim.dynamics import presets
 
         try:
@@ -435,7 +434,7 @@ class AirspaceParallelEnv(ParallelEnv):
             ],
             axis=1,
         )
-        tr = w.tracks
+        tr = w.tracks.view()
         owner = np.asarray(tr.owner, dtype=np.int64)
         slot_of = np.full(len(w.ids), -1, dtype=np.int64)
         slot_of[idx] = np.arange(len(idx))

@@ -165,7 +165,7 @@ class World:
 
         self.sensor = registry.get("sensor", sc.sensor.kind)(sc.sensor, self.dt)
         self.tracker_preset = presets.get(sc.tracker.model, dt=self.dt)
-        self.tracks = TrackTable(
+        self.tracks = TrackTable.build(
             n,
             sc.tracker.kind,
             self.tracker_preset,
@@ -323,7 +323,7 @@ class World:
         self.tracks.update(self.time, scanned, owner, intruder, z, self.active, truth)
         # detection and advice for the coming step
         runs = self.trackers_on & self.active
-        t = self.tracks
+        t = self.tracks.view()
         ok = t.age >= self.avoidance.confirm_steps  # confirmed tracks only
         self._enc = gather(t.owner[ok], t.x[ok], self.positions, self.velocities, runs)
         self._enc_track_rows = np.flatnonzero(ok)  # enc.rows index these table rows
@@ -353,9 +353,9 @@ class World:
             x = t.x
             est_mode = true_mode = None
             mk = self._is_markov[t.intruder]
-            if mk.any() and t.n_modes:
+            if mk.any() and self.tracks.n_modes:
                 mu = t.mu[mk]
-                if mu.shape[1] == t.n_modes and np.isfinite(mu).all():
+                if mu.shape[1] == self.tracks.n_modes and np.isfinite(mu).all():
                     est_mode = np.argmax(mu, axis=1)
                     true_mode = self.modes[t.intruder[mk]]
             m.tracking(x[:, (0, 2)], self.positions[t.intruder], est_mode, true_mode)
@@ -370,13 +370,13 @@ class World:
         ``times_s``. None if the tracker has no mode predictions (``truth``). Rows are
         predicted ``chunk`` at a time, so memory stays bounded.
         """
-        f = self.tracks.filter
-        if f is None or not hasattr(f, "predict_modes_at"):
+        if not self.tracks.predicts_modes:
             return None
         steps = np.unique(np.maximum(1, np.rint(np.asarray(times_s) / self.dt))).astype(np.int64)
         t = steps * self.dt
         n_own, K = enc.valid.shape
-        mu_all = self.tracks.mu
+        view = self.tracks.view()
+        mu_all = view.mu
         M = mu_all.shape[1]
         xs = np.zeros((n_own, K, M, steps.size, 2))
         Ps = np.zeros((n_own, K, M, steps.size, 2, 2))
@@ -385,7 +385,7 @@ class World:
         rows = self._enc_track_rows[enc.rows[oi, ki]]
         for a in range(0, rows.size, chunk):
             sl = slice(a, a + chunk)
-            x, P = f.predict_modes_at(steps, rows[sl])
+            x, P = self.tracks.predict_modes_at(steps, view.slots[rows[sl]])
             own = enc.owners[oi[sl]]
             straight = (
                 self.positions[own][:, None, :]
@@ -483,7 +483,7 @@ class World:
         ``nmac_pairs``         (Q, 2) int    aircraft index pairs (i < j) in NMAC
         =====================  ============  ================================================
         """
-        t = self.tracks
+        t = self.tracks.view()
         x = np.array(t.x)
         tracks = {
             "owner": t.owner.copy(),
@@ -519,7 +519,7 @@ class World:
             "nmac_distance": self.nmac_distance,
             "sensor_range": self.sensor_range,
             "lookahead": float(self.avoidance.lookahead),
-            "mode_names": np.array(t.mode_names, dtype=str),
+            "mode_names": np.array(self.tracks.mode_names, dtype=str),
             "tracks": tracks,
             "predicted": _predict(x, self.avoidance.lookahead, prediction_points)
             if len(x)
