@@ -343,10 +343,15 @@ def test_bench_world_report_with_a_fake_benchmark(monkeypatch, capsys, tmp_path)
         calls.append((n_aircraft, steps, trackers))
         # time per step ∝ N (without trackers) or N^1.5 (with); the IMM a fifth of it
         ms = 1e-2 * n_aircraft * (n_aircraft**0.5 if trackers else 1.0)
-        out = {"ms_per_step": ms, "steps_per_s": 1000.0 / ms, "mean_tracks": 50.0 * n_aircraft}
+        out = {
+            "ms_per_step": ms,
+            "cpu_ms_per_step": ms / 2.0,
+            "steps_per_s": 1000.0 / ms,
+            "mean_tracks": 50.0 * n_aircraft,
+        }
         if trackers:
-            out["imm"] = {"ms_per_step": ms / 5.0, "kernel": "loops"}
-            out["ratio"] = 5.0
+            out["imm"] = {"ms_per_step": ms / 5.0, "cpu_ms_per_step": ms / 8.0, "kernel": "loops"}
+            out["ratio"], out["cpu_ratio"] = 5.0, 4.0
         return out
 
     monkeypatch.setitem(
@@ -377,7 +382,7 @@ def test_bench_world_report_with_a_fake_benchmark(monkeypatch, capsys, tmp_path)
     )
     # with trackers: world ms, the bare IMM's ms and their ratio on the size's line
     line = next(ln for ln in proc.stdout.splitlines() if ln.split()[:2] == ["1000", "on"])
-    assert line.split()[2:] == ["50000", f"{316.23:.2f}", f"{63.25:.2f}", "5.00"]
+    assert line.split()[2:] == ["50000", "316.23", "63.25", "5.00", "158.11", "39.53", "4.00"]
     data = json.loads((tmp_path / "b.json").read_text())
     assert [r["aircraft"] for r in data["results"]] == sizes + sizes
     assert data["results"][4]["imm_ms_per_step"] == pytest.approx(316.227766 / 5)

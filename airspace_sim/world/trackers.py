@@ -50,6 +50,7 @@ from airspace_sim.errors import UserError
 from airspace_sim.registry import register
 from airspace_sim.tracking.imm import SlotIMM
 from airspace_sim.tracking.initialisation import two_point_initialisation
+from airspace_sim.tracking.keymap import KeyMap
 from airspace_sim.tracking.slots import Slots
 
 #: Velocity variance added at track start for a manoeuvring target, (m/s)².
@@ -196,19 +197,20 @@ class TrackView:
         t = table.tracker
         s = np.flatnonzero(t.alive)
         self.slots = _ro(s)
-        self.owner = _ro(table._owner[s])
-        self.intruder = _ro(table._intruder[s])
-        self.misses = _ro(table._misses[s])
-        self.age = _ro(table._age[s])
-        self.x = _ro(np.asarray(t.x)[s])
-        self.mu = _ro(np.asarray(t.mu)[s])
+        # (np.take: a row gather several times faster than fancy indexing)
+        self.owner = _ro(np.take(table._owner, s))
+        self.intruder = _ro(np.take(table._intruder, s))
+        self.misses = _ro(np.take(table._misses, s))
+        self.age = _ro(np.take(table._age, s))
+        self.x = _ro(np.take(t.x, s, axis=0))
+        self.mu = _ro(np.take(t.mu, s, axis=0))
         self._tracker = t
         self._P = None
 
     @property
     def P(self) -> np.ndarray:
         if self._P is None:
-            self._P = _ro(np.asarray(self._tracker.P)[self.slots])
+            self._P = _ro(np.take(self._tracker.P, self.slots, axis=0))
         return self._P
 
     def __len__(self) -> int:
@@ -246,9 +248,8 @@ class TrackTable:
         self._intruder = np.zeros(0, dtype=np.int64)
         self._misses = np.zeros(0, dtype=np.int64)
         self._age = np.zeros(0, dtype=np.int64)
-        # live tracks' keys owner·N + intruder, sorted, and their slots
-        self._keys = np.zeros(0, dtype=np.int64)
-        self._key_slot = np.zeros(0, dtype=np.int64)
+        # live tracks' slots by key owner·N + intruder
+        self._index = KeyMap()
         # pending detections (sorted by key): last measurement and its time
         self._pend_key = np.zeros(0, dtype=np.int64)
         self._pend_z = np.zeros((0, 2))
@@ -276,7 +277,7 @@ class TrackTable:
 
     # ------------------------------------------------------------------ views
     def __len__(self) -> int:
-        return int(self._keys.size)
+        return len(self._index)
 
     @property
     def n_modes(self) -> int:
@@ -301,13 +302,6 @@ class TrackTable:
             self._view = TrackView(self)
         return self._view
 
-    def _lookup(self, query: np.ndarray) -> np.ndarray:
-        """Slot of each key in ``query`` (D,), or −1 where there is no track."""
-        if self._keys.size == 0 or query.size == 0:
-            return np.full(query.size, -1, dtype=np.int64)
-        pos = np.minimum(np.searchsorted(self._keys, query), self._keys.size - 1)
-        return np.where(self._keys[pos] == query, self._key_slot[pos], -1)
-
     # ----------------------------------------------------------------- update
     def update(
         self, time: float, scanned: bool, det_owner, det_intruder, z, alive, truth_states=None
@@ -325,7 +319,7 @@ class TrackTable:
             raise UserError("TrackTable.update: this tracker needs truth_states")
         z = np.asarray(z, dtype=float).reshape(-1, 2)
         det_key = np.asarray(det_owner, np.int64) * self.n + np.asarray(det_intruder, np.int64)
-        slot_of_det = self._lookup(det_key)
+        slot_of_det = self._index.get(det_key)  # −1: no track
         matched = slot_of_det >= 0
         hit = slot_of_det[matched]
         # 1. step every live track (NaN row: no measurement)
@@ -356,10 +350,7 @@ class TrackTable:
 
     def _drop(self, slots: np.ndarray) -> None:
         self.tracker.drop(slots)
-        keys = self._owner[slots] * self.n + self._intruder[slots]
-        pos = np.searchsorted(self._keys, keys)
-        self._keys = np.delete(self._keys, pos)
-        self._key_slot = np.delete(self._key_slot, pos)
+        self._index.delete(self._owner[slots] * self.n + self._intruder[slots])
         self._owner[slots] = 0
         self._intruder[slots] = 0
 
@@ -377,9 +368,7 @@ class TrackTable:
         self._intruder[slots] = keys % self.n
         self._misses[slots] = 0
         self._age[slots] = 0
-        pos = np.searchsorted(self._keys, keys)
-        self._keys = np.insert(self._keys, pos, keys)
-        self._key_slot = np.insert(self._key_slot, pos, slots)
+        self._index.put(keys, slots)
 
     def _births(self, time, keys, z, truth_states) -> None:
         order = np.argsort(keys, kind="stable")
