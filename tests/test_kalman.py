@@ -135,19 +135,6 @@ def test_append_remove_keep_rows_independent():
     np.testing.assert_allclose(a.x[3:], c.x, rtol=1e-12)
 
 
-def test_predict_ahead():
-    F, Q = models.constant_velocity(1.0), models.white_noise_acceleration(1.0, 1.0)
-    H, R = models.position_measurement_matrix(), models.measurement_noise()
-    kf = KalmanFilter(F, Q, H, R, np.array([[0.0, 10.0, 0.0, -5.0, 0.0]]), np.eye(5))
-    x, _P = kf.x.copy(), kf.P.copy()
-    xs, Ps = kf.predict_ahead(3)
-    np.testing.assert_array_equal(kf.x, x)
-    np.testing.assert_allclose(xs[0, 2], np.linalg.matrix_power(F, 3) @ x[0])
-    kf.predict()
-    kf.predict()
-    np.testing.assert_allclose(Ps[0, 1], kf.P[0], rtol=1e-12)
-
-
 def test_shape_errors():
     F = np.eye(4)
     with pytest.raises(UserError, match="shapes"):

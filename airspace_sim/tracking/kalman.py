@@ -154,15 +154,3 @@ class KalmanFilter:
         """One cycle: predict, then update with ``z`` (B, m); a NaN (or inf) row predicts only."""
         self.predict()
         self.update(z)
-
-    def predict_ahead(self, steps: int) -> tuple[np.ndarray, np.ndarray]:
-        """Predictions 1..``steps`` steps ahead without changing the filter:
-        (B, steps, n) means and (B, steps, n, n) covariances."""
-        xs = np.empty((self.B, steps, self.n))
-        Ps = np.empty((self.B, steps, self.n, self.n))
-        x, P = self.x, self.P
-        for s in range(steps):
-            x = x @ self.F.T + self.u
-            P = _sym(self.F @ P @ self.F.T + self.Q)
-            xs[:, s], Ps[:, s] = x, P
-        return xs, Ps

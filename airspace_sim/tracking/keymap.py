@@ -119,8 +119,3 @@ class KeyMap:
         keys = np.ascontiguousarray(keys, dtype=np.int64)
         if keys.size:
             self.size -= int(_delete(self._k, self._v, keys, self._shift))
-
-    def items(self):
-        """(keys, values) of every entry, in table order."""
-        live = self._k != _EMPTY
-        return self._k[live].copy(), self._v[live].copy()
