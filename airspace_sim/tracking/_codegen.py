@@ -8,13 +8,16 @@ are non-zero; the values stay run-time arguments — and that body sits inside o
 the ``W`` trackers of a chunk. LLVM vectorises the loop as a whole (one tracker per SIMD
 lane), and the model's zeros cost nothing.
 
+Slots as in :mod:`._kernels`: a chunk without a live lane is skipped, a free lane gets no
+measurement (and a finite dummy value) and its state is not written back.
+
 Per chunk: (Z) gather the measurements; (A) mixing, prediction, innovation, ``d²`` and
 ``det S`` — no calls, vectorised; (L) logarithms, the gate and the mode probabilities —
 ``log``/``exp`` are libm calls, so this loop runs a tracker at a time; (B) the update,
 recomputing ``P Hᵀ`` and ``S⁻¹`` from the stored prediction (the same operations, so the
 same bits) rather than storing them, and the combination; then block copies write the
-chunk's new state back in place (only the upper triangle of each ``P_j`` is stored) and
-(S) scatters the (B, ...) outputs. Every intermediate of a chunk lives in one flat work
+chunk's new state back in place (only the upper triangle of each ``P_j`` is stored; lane
+by lane in a chunk with free lanes) and (S) scatters the outputs of the live slots. Every intermediate of a chunk lives in one flat work
 array indexed at literal offsets, so LLVM can prove that different rows never overlap
 (distinct arrays would each need a run-time alias check, of which it allows only a few).
 
