@@ -43,6 +43,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from airspace_sim import parts
 from airspace_sim.dynamics.presets import Preset
@@ -64,6 +65,43 @@ def _ro(a: np.ndarray) -> np.ndarray:
     v = a.view()
     v.flags.writeable = False
     return v
+
+
+@njit(cache=True)
+def _measurements_by_slot(Z, slot_of_det, z):
+    """Z (capacity, 2) ← NaN, then row ``slot_of_det[d]`` ← z[d] where that is ≥ 0 (one pass;
+    numpy's row scatter is several times slower)."""
+    Z[:] = np.nan
+    for d in range(slot_of_det.size):
+        s = slot_of_det[d]
+        if s >= 0:
+            Z[s, 0] = z[d, 0]
+            Z[s, 1] = z[d, 1]
+
+
+@njit(cache=True)
+def _advance(live, owner, intruder, misses, age, slot_of_det, scanned, drop_after, aircraft):
+    """One step of the per-slot bookkeeping (capacity,) arrays, in place: ``age`` + 1;
+    on a scan ``misses`` + 1, reset to 0 for the slots detected (``slot_of_det`` ≥ 0).
+    Returns the live slots to drop: too many misses, or owner or intruder gone."""
+    cap = live.size
+    for s in range(cap):
+        age[s] += 1
+    if scanned:
+        for s in range(cap):
+            misses[s] += 1
+        for d in range(slot_of_det.size):
+            if slot_of_det[d] >= 0:
+                misses[slot_of_det[d]] = 0
+    out = np.empty(cap, dtype=np.int64)
+    k = 0
+    for s in range(cap):
+        if live[s] and (
+            misses[s] >= drop_after or not aircraft[owner[s]] or not aircraft[intruder[s]]
+        ):
+            out[k] = s
+            k += 1
+    return out[:k]
 
 
 def mode_names(preset: Preset) -> tuple[str, ...]:
@@ -320,31 +358,23 @@ class TrackTable:
         z = np.asarray(z, dtype=float).reshape(-1, 2)
         det_key = np.asarray(det_owner, np.int64) * self.n + np.asarray(det_intruder, np.int64)
         slot_of_det = self._index.get(det_key)  # −1: no track
-        matched = slot_of_det >= 0
-        hit = slot_of_det[matched]
         # 1. step every live track (NaN row: no measurement)
         if len(self):
             cap = t.capacity
             if self._z.shape[0] != cap:
                 self._z = np.empty((cap, 2))
-            self._z.fill(np.nan)
-            self._z[hit] = z[matched]
+            _measurements_by_slot(self._z, slot_of_det, z)
             truth = np.asarray(truth_states)[self._intruder] if t.uses_truth else None
             t.step(self._z, truth)
-        self._age += 1
-        if scanned:
-            self._misses += 1
-            self._misses[hit] = 0
-        # 2. drop
-        if len(self):
-            alive = np.asarray(alive, dtype=bool)
-            drop = (self._misses >= self.drop_after) | ~alive[self._owner]
-            drop |= ~alive[self._intruder]
-            drop &= t.alive
-            if drop.any():
-                self._drop(np.flatnonzero(drop))
+            # 2. age, misses, drop
+            drop = _advance(
+                np.asarray(t.alive), self._owner, self._intruder, self._misses, self._age,
+                slot_of_det, bool(scanned), self.drop_after, np.asarray(alive, dtype=np.bool_),
+            )  # fmt: skip
+            if drop.size:
+                self._drop(drop)
         # 3. births
-        new = ~matched
+        new = slot_of_det < 0
         if new.any():
             self._births(time, det_key[new], z[new], truth_states)
 
