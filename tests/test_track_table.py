@@ -177,3 +177,39 @@ def test_make_tracker_params():
         make_tracker("imm", PRESET, SIGMA, {"bogus": 1})
     with pytest.raises(UserError, match="must be a parts.Tracker"):
         TrackTable(N, object(), SIGMA, 2, 1.0)
+
+
+@pytest.mark.parametrize("kind", ["imm", "truth"])
+def test_table_pickles_and_continues_bit_for_bit(kind):
+    import copy
+    import pickle
+
+    rng = np.random.default_rng(3)
+    t = TrackTable.build(N, kind, PRESET, SIGMA, 2, 1.0)
+    alive = np.ones(N, dtype=bool)
+    o, i = np.array([0, 0, 1, 2, 3]), np.array([1, 2, 3, 0, 1])
+    pos = rng.uniform(-1e4, 1e4, (N, 2))
+    vel = rng.uniform(-200, 200, (N, 2))
+
+    def scan(tab, k):
+        truth = np.zeros((N, 5))
+        truth[:, [0, 2]] = pos + k * vel
+        truth[:, [1, 3]] = vel
+        det = (np.arange(5) + k) % 5 > 1  # two missed scans in five: drops and births
+        z = truth[i][:, [0, 2]] + SIGMA * np.sin(np.arange(10) + k).reshape(5, 2)
+        tab.update(float(k), True, o[det], i[det], z[det], alive, truth)
+
+    seen = []
+    for k in range(6):
+        scan(t, k)
+        v = t.view()
+        seen.append(frozenset(zip(v.owner.tolist(), v.intruder.tolist(), strict=True)))
+    assert len(set(seen[2:])) > 1  # tracks come and go
+    copies = [pickle.loads(pickle.dumps(t)), copy.deepcopy(t)]
+    for k in range(6, 14):
+        for tab in [t, *copies]:
+            scan(tab, k)
+    for c in copies:
+        a, b = t.view(), c.view()
+        for name in ("slots", "owner", "intruder", "misses", "age", "x", "mu", "P"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
