@@ -33,10 +33,6 @@ ENTRY_POINT_GROUP = "airspace_sim.plugins"
 _REGISTRY: dict[str, dict[str, type]] = {kind: {} for kind in KINDS}
 _loaded_plugins = False
 
-#: Kinds whose built-ins may still be plain factory functions (not checked, no ``Params``).
-#: Transitional: the tracker slot-table classes replace them; then this becomes empty.
-FACTORY_FUNCTIONS_ALLOWED = ("tracker",)
-
 
 def register(kind: str, name: str, *, replace: bool = False) -> Callable[[type], type]:
     """Class decorator: register ``cls`` as the part ``name`` of ``kind``.
@@ -53,10 +49,7 @@ def register(kind: str, name: str, *, replace: bool = False) -> Callable[[type],
         raise ValueError(f"unknown part kind {kind!r}; kinds are {', '.join(KINDS)}")
 
     def deco(cls: type) -> type:
-        if kind in FACTORY_FUNCTIONS_ALLOWED and not inspect.isclass(cls) and callable(cls):
-            pass  # transitional factory function (see FACTORY_FUNCTIONS_ALLOWED)
-        else:
-            parts.check(kind, cls, name)
+        parts.check(kind, cls, name)
         old = _REGISTRY[kind].get(name)
         if old is not None and old is not cls and not _same(old, cls) and not replace:
             raise UserError(
@@ -110,8 +103,6 @@ def build(kind: str, name: str, *args, params=None):
     constructor arguments (:data:`airspace_sim.parts.CONSTRUCTOR_ARGS`).
     """
     cls = get(kind, name)
-    if not inspect.isclass(cls):  # transitional factory function (FACTORY_FUNCTIONS_ALLOWED)
-        return cls(*args, **(params or {}))
     Params = params_class(kind, name)
     if params is None:
         params = Params()

@@ -537,9 +537,18 @@ def test_bench_world_report_with_a_fake_benchmark(monkeypatch, capsys, tmp_path)
 
     def fake_bench_world(n_aircraft, steps, trackers):
         calls.append((n_aircraft, steps, trackers))
-        # time per step ∝ N (without trackers) or N^1.5 (with)
-        cost = 1e-5 * n_aircraft * (n_aircraft**0.5 if trackers else 1.0)
-        return {"steps_per_second": 1.0 / cost, "setup_s": 0.1}
+        # time per step ∝ N (without trackers) or N^1.5 (with); the IMM a fifth of it
+        ms = 1e-2 * n_aircraft * (n_aircraft**0.5 if trackers else 1.0)
+        out = {
+            "ms_per_step": ms,
+            "cpu_ms_per_step": ms / 2.0,
+            "steps_per_s": 1000.0 / ms,
+            "mean_tracks": 50.0 * n_aircraft,
+        }
+        if trackers:
+            out["imm"] = {"ms_per_step": ms / 5.0, "cpu_ms_per_step": ms / 8.0, "kernel": "loops"}
+            out["ratio"], out["cpu_ratio"] = 5.0, 4.0
+        return out
 
     monkeypatch.setitem(
         sys.modules,
@@ -547,10 +556,18 @@ def test_bench_world_report_with_a_fake_benchmark(monkeypatch, capsys, tmp_path)
         types.SimpleNamespace(bench_world=fake_bench_world),
     )
     proc = main_in_process(
-        capsys, "bench-world", "--steps", "7", "--json", str(tmp_path / "b.json")
+        capsys,
+        "bench-world",
+        "--steps",
+        "7",
+        "--trackers",
+        "both",
+        "--json",
+        str(tmp_path / "b.json"),
     )
     assert proc.returncode == 0, proc.stderr
-    assert calls == [(100, 7, False), (1000, 7, False), (100, 7, True), (1000, 7, True)]
+    sizes = [100, 1000, 3000]
+    assert calls == [(n, 7, False) for n in sizes] + [(n, 7, True) for n in sizes]
     assert (
         "trackers off: 100 → 1000 aircraft (×10): time per step ×10.00, growth exponent 1.00"
         in proc.stdout
@@ -559,22 +576,13 @@ def test_bench_world_report_with_a_fake_benchmark(monkeypatch, capsys, tmp_path)
         "trackers on: 100 → 1000 aircraft (×10): time per step ×31.62, growth exponent 1.50"
         in proc.stdout
     )
+    # with trackers: world ms, the bare IMM's ms and their ratio on the size's line
+    line = next(ln for ln in proc.stdout.splitlines() if ln.split()[:2] == ["1000", "on"])
+    assert line.split()[2:] == ["50000", "316.23", "63.25", "5.00", "158.11", "39.53", "4.00"]
     data = json.loads((tmp_path / "b.json").read_text())
-    assert [r["aircraft"] for r in data["results"]] == [100, 1000, 100, 1000]
+    assert [r["aircraft"] for r in data["results"]] == sizes + sizes
+    assert data["results"][4]["imm_ms_per_step"] == pytest.approx(316.227766 / 5)
     assert data["growth"][0]["exponent"] == pytest.approx(1.0)
-
-
-def test_bench_world_accepts_a_number(monkeypatch, capsys):
-    import types
-
-    monkeypatch.setitem(
-        sys.modules,
-        "airspace_sim.world.benchmark",
-        types.SimpleNamespace(bench_world=lambda n, steps, trackers: 5000.0 / n),
-    )
-    proc = main_in_process(capsys, "bench-world", "--sizes", "10", "20", "--trackers", "off")
-    assert proc.returncode == 0, proc.stderr
-    assert "time per step ×2.00, growth exponent 1.00" in proc.stdout
 
 
 @pytest.mark.skipif(
@@ -590,6 +598,8 @@ def test_bench_world_real_smoke(capsys, tmp_path):
         "8",
         "--steps",
         "2",
+        "--trackers",
+        "both",
         "--json",
         str(tmp_path / "b.json"),
     )
@@ -601,7 +611,9 @@ def test_bench_world_real_smoke(capsys, tmp_path):
         (4, True),
         (8, True),
     ]
-    assert all(r["steps_per_second"] > 0 for r in data["results"])
+    assert all(r["ms_per_step"] > 0 for r in data["results"])
+    on = [r for r in data["results"] if r["trackers"]]
+    assert all(r["imm_ms_per_step"] > 0 and r["ratio"] > 0 for r in on)
     assert len(data["growth"]) == 2 and "growth exponent" in proc.stdout
 
 

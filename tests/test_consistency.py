@@ -18,8 +18,8 @@ from airspace_sim.tracking.consistency import (
     monte_carlo,
     nees,
     nis,
-    two_point_initialisation,
 )
+from airspace_sim.tracking.initialisation import two_point_initialisation
 
 N_RUNS, N_STEPS, BURN_IN, SEED = 200, 300, 30, 2026
 
@@ -76,7 +76,7 @@ def test_two_point_initialisation_covariance_is_the_error_covariance():
     v = rng.uniform(-250, 250, (B, 2))
     z0 = p0 + s * rng.standard_normal((B, 2))
     z1 = p0 + v * dt + s * rng.standard_normal((B, 2))
-    x0, P0 = two_point_initialisation(z0, z1, dt, R, (0.0, 0.05, -0.05), (0.6, 0.2, 0.2))
+    x0, P0 = two_point_initialisation(z0, z1, dt, R, omega=0.01, omega_var=0.4 * 0.05**2)
     err = x0[:, :4] - np.stack(
         [p0[:, 0] + v[:, 0] * dt, v[:, 0], p0[:, 1] + v[:, 1] * dt, v[:, 1]], 1
     )
@@ -84,8 +84,27 @@ def test_two_point_initialisation_covariance_is_the_error_covariance():
     P = P0[0, :4, :4]
     sd = np.sqrt(np.outer(np.diag(P), np.diag(P)) * 2 / B)  # ≥ sd of each sample (co)variance
     assert np.all(np.abs(C - P) < 5 * sd), (C, P)
-    assert P0[0, 4, 4] == pytest.approx(0.4 * 0.05**2) and x0[0, 4] == pytest.approx(0.0, abs=1e-15)
+    assert P0[0, 4, 4] == 0.4 * 0.05**2 and x0[0, 4] == 0.01
     assert np.all(np.linalg.eigvalsh(P0[0]) > 0)
+
+
+def test_two_point_initialisation_per_track_dt_and_manoeuvre_allowance():
+    """Per-track Δt and the velocity allowance, against the closed form written out."""
+    z0 = np.array([[0.0, 0.0], [100.0, -50.0]])
+    z1 = np.array([[230.0, 10.0], [100.0, 410.0]])
+    dt = np.array([1.0, 2.0])
+    R = np.array([[2500.0, 100.0], [100.0, 1600.0]])
+    x0, P0 = two_point_initialisation(z0, z1, dt, R, omega_var=1e-4, extra_velocity_var=100.0)
+    for b in range(2):
+        d = dt[b]
+        assert x0[b].tolist() == [
+            z1[b, 0], (z1[b, 0] - z0[b, 0]) / d, z1[b, 1], (z1[b, 1] - z0[b, 1]) / d, 0.0
+        ]  # fmt: skip
+        pos, vel = [0, 2], [1, 3]
+        np.testing.assert_array_equal(P0[b][np.ix_(pos, pos)], R)
+        np.testing.assert_array_equal(P0[b][np.ix_(pos, vel)], R / d)
+        np.testing.assert_array_equal(P0[b][np.ix_(vel, vel)], 2 * R / d**2 + 100.0 * np.eye(2))
+        assert P0[b, 4, 4] == 1e-4 and not P0[b, 4, :4].any()
 
 
 # --- the Monte Carlo ----------------------------------------------------------------------

@@ -126,6 +126,8 @@ def test_world_frame_differs_from_theta_for_moving_intruder():
 @given(vec, vec, position, st.floats(-np.pi, np.pi))
 def test_rotation_invariance(vo, vi, b, alpha):
     assume(np.linalg.norm(vo) > 1.0)
+    # a relative velocity of ~1e-56 m/s has no direction to rotate: ill-conditioned
+    assume(np.linalg.norm(vi - vo) > 1e-6 * np.linalg.norm(vo))
     assume(abs(cross(vi - vo, -b)) > 1e-3 * np.linalg.norm(b) * np.linalg.norm(vi - vo))
     p1, ok1 = tangent_heading_change(vo, vi, b, R)
     p2, ok2 = tangent_heading_change(rotate(vo, alpha), rotate(vi, alpha), rotate(b, alpha), R)

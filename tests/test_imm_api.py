@@ -90,7 +90,9 @@ def test_broadcast_P0_mu0_equal_explicit():
     assert_same_bits(snapshot(a), snapshot(b))
 
 
-def test_views_are_read_only_and_not_mutated_by_step():
+def test_views_are_read_only_and_valid_until_the_next_step():
+    """The ownership rule of the IMM docstring: attributes are read-only views of the
+    estimator's buffers, overwritten in place by the next step; a copy keeps its values."""
     rng = np.random.default_rng(2)
     _, args = seed_model()
     x0, P0, mu0 = initial(rng, 3)
@@ -99,12 +101,20 @@ def test_views_are_read_only_and_not_mutated_by_step():
     imm.step(z[0])
     x, P, mu = imm.x, imm.P, imm.mu
     kept = x.copy(), P.copy(), mu.copy()
-    with pytest.raises(ValueError):
-        x[0, 0] = 1.0
+    for a in (x, P, mu, imm.nis, imm.log_likelihood, imm.gated, imm.x_modes, imm.P_modes):
+        with pytest.raises(ValueError):
+            a.flat[0] = 1.0
     imm.step(z[1])
-    for a, b in zip((x, P, mu), kept):
+    # no new output arrays per step: the views held now show the new estimate
+    for a, now in zip((x, P, mu), (imm.x, imm.P, imm.mu)):
+        assert np.shares_memory(a, now)
+        np.testing.assert_array_equal(a, now)
+    assert not np.array_equal(imm.x, kept[0])
+    # and the copies kept the old one: a fresh IMM stepped once gives the same bits
+    ref = IMM(x0=x0, P0=P0, mu0=mu0, **args)
+    ref.step(z[0])
+    for a, b in zip((ref.x, ref.P, ref.mu), kept):
         np.testing.assert_array_equal(a, b)
-    assert not np.array_equal(imm.x, x)
 
 
 def test_missing_row_gives_nan_nis_and_loglik():

@@ -135,29 +135,6 @@ def test_append_remove_keep_rows_independent():
     np.testing.assert_allclose(a.x[3:], c.x, rtol=1e-12)
 
 
-def test_predict_ahead_and_imm_view():
-    F, Q = models.constant_velocity(1.0), models.white_noise_acceleration(1.0, 1.0)
-    H, R = models.position_measurement_matrix(), models.measurement_noise()
-    kf = KalmanFilter(F, Q, H, R, np.array([[0.0, 10.0, 0.0, -5.0, 0.0]]), np.eye(5))
-    x, _P = kf.x.copy(), kf.P.copy()
-    xs, Ps = kf.predict_ahead(3)
-    np.testing.assert_array_equal(kf.x, x)
-    np.testing.assert_allclose(xs[0, 2], np.linalg.matrix_power(F, 3) @ x[0])
-    kf.predict()
-    kf.predict()
-    np.testing.assert_allclose(Ps[0, 1], kf.P[0], rtol=1e-12)
-    xm, Pm = kf.predict_modes(2)
-    assert xm.shape == (1, 1, 2, 5) and Pm.shape == (1, 1, 2, 5, 5)
-    assert (
-        kf.mu.shape == (1, 1) and kf.x_modes.shape == (1, 1, 5) and kf.P_modes.shape == (1, 1, 5, 5)
-    )
-    x_at, P_at = kf.predict_modes_at([1, 4, 9], rows=[0])
-    xs9, Ps9 = kf.predict_ahead(9)
-    assert x_at.shape == (1, 1, 3, 5) and P_at.shape == (1, 1, 3, 5, 5)
-    np.testing.assert_allclose(x_at[0, 0], xs9[0, [0, 3, 8]], rtol=1e-12)
-    np.testing.assert_allclose(P_at[0, 0], Ps9[0, [0, 3, 8]], rtol=1e-12)
-
-
 def test_shape_errors():
     F = np.eye(4)
     with pytest.raises(UserError, match="shapes"):

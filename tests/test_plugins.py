@@ -51,11 +51,11 @@ def clean_registry(monkeypatch, tmp_path):
 
 
 def _check_kalman_factory():
-    factory = registry.get("tracker", "kalman")
-    f = factory(presets.get("realistic"), 50.0)
-    assert f.B == 0
-    rows = f.append(np.zeros((2, 5)), np.eye(5) * 100.0, None)
-    assert list(rows) == [0, 1]
+    cls = registry.get("tracker", "kalman")
+    f = cls(presets.get("realistic"), 50.0, cls.Params())
+    assert f.alive.sum() == 0
+    slots = f.birth(np.zeros((2, 5)), np.eye(5) * 100.0)
+    assert list(slots) == [0, 1]
     return f
 
 
@@ -180,7 +180,7 @@ def test_kalman_tracker_follows_a_straight_target():
     mod = _load_plugin_module()
     rng = np.random.default_rng(0)
     sigma, dt, n_targets = 50.0, 1.0, 64
-    f = mod.kalman_tracker(presets.get("realistic"), sigma)
+    f = mod.ConstantVelocityTracker(presets.get("realistic"), sigma)
     v = rng.uniform(-250, 250, size=(n_targets, 2))
     p0 = rng.uniform(-2e4, 2e4, size=(n_targets, 2))
     x0 = np.zeros((n_targets, 5))
@@ -188,45 +188,48 @@ def test_kalman_tracker_follows_a_straight_target():
     x0[:, [1, 3]] = v + rng.normal(0, 20, (n_targets, 2))
     x0[:, 4] = 0.3  # ignored: the CV model has no turn
     P0 = np.diag([sigma**2, 30.0**2, sigma**2, 30.0**2, 1e-4])
-    f.append(x0, P0, None)
-    assert np.all(f.x[:, 4] == 0)
+    slots = f.birth(x0, P0)
+    assert np.all(f.x[slots, 4] == 0)
     errs = []
     for k in range(1, 61):
         truth = p0 + v * dt * k
         z = truth + rng.normal(0, sigma, truth.shape)
         if k % 10 == 0:
             z[::2] = np.nan  # missed scans: predict only
-        f.step(z)
-        errs.append(np.hypot(*(f.x[:, [0, 2]] - truth).T))
+        Z = np.full((f.capacity, 2), np.nan)
+        Z[slots] = z
+        f.step(Z)
+        errs.append(np.hypot(*(f.x[slots][:, [0, 2]] - truth).T))
     errs = np.array(errs)
     # After convergence the filter beats a single measurement (σ√2 ≈ 71 m RMS radial).
     assert np.sqrt(np.mean(errs[-20:] ** 2)) < sigma
-    vel_rms = np.sqrt(np.mean((f.x[:, [1, 3]] - v) ** 2))
+    x, P = f.x[slots], f.P[slots]
+    vel_rms = np.sqrt(np.mean((x[:, [1, 3]] - v) ** 2))
     assert vel_rms < 10.0  # m/s, from an initial 20 m/s error per axis
     # the filter's covariance is honest: mean NEES of the position near 2 (chi-square, 2 dof)
-    e = f.x[:, [0, 2]] - truth
-    Pp = f.P[:, [0, 2]][:, :, [0, 2]]
+    e = x[:, [0, 2]] - truth
+    Pp = P[:, [0, 2]][:, :, [0, 2]]
     nees = np.einsum("bi,bi->b", e, np.linalg.solve(Pp, e[..., None])[..., 0])
     assert 0.5 < nees.mean() < 4.0
-    assert np.all(f.x[:, 4] == 0)
-    assert np.all(np.linalg.eigvalsh(f.P) > 0)
-    assert f.mu.shape == (n_targets, 1)
+    assert np.all(x[:, 4] == 0)
+    assert np.all(np.linalg.eigvalsh(P) > 0)
+    assert np.all(f.mu[slots] == 1.0)
 
 
-def test_kalman_tracker_remove_by_mask_and_indices():
+def test_kalman_tracker_drop_and_reuse_slots():
     mod = _load_plugin_module()
-    f = mod.kalman_tracker(presets.get("seed"), 50.0)
+    f = mod.ConstantVelocityTracker(presets.get("seed"), 50.0)
     x0 = np.zeros((5, 5))
     x0[:, 0] = np.arange(5)
-    f.append(x0, np.eye(5), None)
-    f.remove(np.array([True, False, True, False, False]))
-    assert list(f.x[:, 0]) == [1, 3, 4]
-    f.remove([0])
-    assert list(f.x[:, 0]) == [3, 4]
-    f.remove(np.zeros(2, dtype=bool))
-    assert f.B == 2
-    with pytest.raises(ValueError):
-        f.remove(np.zeros(3, dtype=bool))
+    assert list(f.birth(x0, np.eye(5))) == [0, 1, 2, 3, 4]
+    f.drop([0, 2])
+    assert list(np.flatnonzero(f.alive)) == [1, 3, 4]
+    assert list(f.x[f.alive, 0]) == [1, 3, 4]  # the others did not move
+    f.drop([])
+    with pytest.raises(UserError, match="not live"):
+        f.drop([0])
+    assert sorted(f.birth(x0[:2] + 10.0, np.eye(5))) == [0, 2]  # freed slots reused
+    assert f.x[0, 0] + f.x[2, 0] == 21.0
 
 
 def test_kalman_noise_follows_the_preset():
@@ -235,10 +238,11 @@ def test_kalman_noise_follows_the_preset():
     assert mod.manoeuvre_sigma(real) == pytest.approx(
         0.5 * np.radians(3.0) * np.mean(real.speed_range)
     )
-    f1 = mod.kalman_tracker(real, 50.0)
-    f2 = mod.kalman_tracker(real, 50.0, sigma_accel=0.0)
+    cls = mod.ConstantVelocityTracker
+    f1 = cls(real, 50.0)
+    f2 = cls(real, 50.0, cls.Params(sigma_accel=0.0))
     assert f1.Q[1, 1] > f2.Q[1, 1] > 0
-    assert mod.kalman_tracker(seed, 50.0).F[0, 1] == pytest.approx(0.1)
+    assert cls(seed, 50.0).F[0, 1] == pytest.approx(0.1)
     np.testing.assert_allclose(f1.R, 2500.0 * np.eye(2))
 
 
@@ -261,7 +265,7 @@ def test_kalman_tracker_in_a_world(clean_registry):
     world = World(sc, seed=0)
     for _ in range(10):
         world.step()
-    tracks = world.tracks
+    tracks = world.tracks.view()
     assert len(tracks.owner) == 2  # each aircraft tracks the other
     assert np.all(np.isfinite(tracks.x))
     # the track is near the truth (within a few σ)

@@ -42,7 +42,7 @@ def test_fields_shapes_and_values_match_the_world():
         np.testing.assert_array_equal(getattr(s, name), getattr(world, name), err_msg=name)
     np.testing.assert_array_equal(s.true_modes, world.modes)
     for name in ("owner", "intruder", "x", "P", "mu", "misses", "age"):
-        np.testing.assert_array_equal(getattr(s.tracks, name), getattr(world.tracks, name))
+        np.testing.assert_array_equal(getattr(s.tracks, name), getattr(world.tracks.view(), name))
     assert s.tracks.x.shape == (p, 5) and s.tracks.P.shape == (p, 5, 5)
     assert s.tracks.mu.shape == (p, 3) and s.mode_names == ("straight", "left", "right")
     assert s.predicted.shape == (p, 6, 2)

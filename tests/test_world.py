@@ -185,7 +185,8 @@ def test_markov_modes_follow_the_chain_and_imm_recognises_them():
 
 # ---------------------------------------------------------------- track table
 def track_set(world):
-    return set(zip(world.tracks.owner.tolist(), world.tracks.intruder.tolist()))
+    v = world.tracks.view()
+    return set(zip(v.owner.tolist(), v.intruder.tolist()))
 
 
 def test_tracks_start_on_second_detection_and_drop_after_misses():
@@ -251,7 +252,7 @@ def test_no_detections_no_tracks_and_period():
 def test_tracks_are_in_the_world_frame_and_accurate():
     world = World(head_on("none"))
     world.run(60)
-    t = world.tracks
+    t = world.tracks.view()
     err = np.hypot(*(t.x[:, (0, 2)] - world.positions[t.intruder]).T)
     verr = np.hypot(*(t.x[:, (1, 3)] - world.velocities[t.intruder]).T)
     assert len(t) == 2 and np.all(err < 150.0) and np.all(verr < 30.0)
@@ -281,7 +282,7 @@ def run_record(world, steps):
     rec = []
     for _ in range(steps):
         world.step()
-        rec.append((world.positions.copy(), np.array(world.tracks.x), world.advice.copy()))
+        rec.append((world.positions.copy(), np.array(world.tracks.view().x), world.advice.copy()))
     return rec
 
 
@@ -332,7 +333,7 @@ def test_every_registered_resolver_and_tracker_runs_in_a_world():
         world = World(head_on("bands", tracker=tr))
         world.run(120)
         assert len(world.tracks) == 2, tr
-        assert world.tracks.x.shape == (2, 5)
+        assert world.tracks.view().x.shape == (2, 5)
 
 
 def test_left_commitment_returns_right_once_the_right_is_clear():
@@ -445,18 +446,24 @@ def test_bands_probabilistic_gets_the_tracks_mode_predictions():
     n_own, K = enc.valid.shape
     assert xs.shape == (n_own, K, 3, 3, 2) and Ps.shape == (n_own, K, 3, 3, 2, 2)
     np.testing.assert_allclose(mu[enc.valid].sum(axis=-1), 1.0)
+    # mode 0 is constant velocity: intruder x + v·t from its mode-0 posterior, minus the
+    # ownship flying straight (closed form)
+    t = np.array([10.0, 20.0, 30.0])
+    view = world.tracks.view()
     o, k = np.argwhere(enc.valid)[0]
     row, own = enc.rows[o, k], enc.owners[o]
     # the slot is the track of that ownship, at that relative position
     assert view.owner[row] == own
     np.testing.assert_allclose(view.x[row, (0, 2)] - world.positions[own], enc.rel_position[o, k])
-    # mode 0 is constant velocity and the ownship flies straight: the relative prediction is
-    # a + b·t exactly (equal differences over equal times), and at t → 0 it starts near the
-    # track's relative position
-    d1, d2 = xs[o, k, 0, 1] - xs[o, k, 0, 0], xs[o, k, 0, 2] - xs[o, k, 0, 1]
-    np.testing.assert_allclose(d1, d2, rtol=1e-9, atol=1e-6)
-    start = xs[o, k, 0, 0] - d1  # t = 0
-    assert np.hypot(*(start - enc.rel_position[o, k])) < 500.0
+    xm, _ = world.tracks.tracker.imm.modes(view.slots[row : row + 1])
+    x0 = xm[0, 0]
+    expect = (
+        np.array([x0[0], x0[2]])[None]
+        + t[:, None] * np.array([x0[1], x0[3]])[None]
+        - world.positions[own]
+        - t[:, None] * world.velocities[own]
+    )
+    np.testing.assert_allclose(xs[o, k, 0], expect, rtol=1e-9, atol=1e-6)
     assert np.all(np.diff(Ps[o, k, 0, :, 0, 0]) > 0)  # uncertainty grows ahead
 
 

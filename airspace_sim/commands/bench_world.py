@@ -1,8 +1,11 @@
-"""``airspace-sim bench-world``: world steps per second at N = 100 and 1000 aircraft.
+"""``airspace-sim bench-world``: world step time against the bare IMM step, by size.
 
-Calls :func:`airspace_sim.world.benchmark.bench_world` for each size, without and with
-trackers, and prints steps per second and how the cost per step grows with N (the ratio of
-times per step, and the exponent ``log(ratio) / log(N₂/N₁)``: 1 is linear, 2 quadratic)::
+For each number of aircraft, :func:`airspace_sim.world.benchmark.bench_world` times world
+steps of the constant-density benchmark traffic (with trackers, and/or with perfect
+surveillance), and — with trackers — the bare IMM step over the same number of tracks
+(same preset, in this process, right after): the ratio says how much of a world step is
+not tracking. Then how the cost per step grows with N (ratio of times per step and the
+exponent ``log(ratio) / log(N₂/N₁)``: 1 is linear, 2 quadratic)::
 
     airspace-sim bench-world
     airspace-sim bench-world --sizes 100 300 1000 --steps 30 --trackers on --json out/bench.json
@@ -19,7 +22,9 @@ from pathlib import Path
 
 from airspace_sim.errors import UserError
 
-HELP = "benchmark world steps per second at 100 and 1000 aircraft, with and without trackers"
+HELP = "benchmark world steps against the bare IMM step at 100, 1000 and 3000 aircraft"
+
+DEFAULT_SIZES = (100, 1000, 3000)
 
 
 def _positive_int(text: str) -> int:
@@ -37,9 +42,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--sizes",
         type=_positive_int,
         nargs="+",
-        default=[100, 1000],
+        default=list(DEFAULT_SIZES),
         metavar="N",
-        help="numbers of aircraft (default: 100 1000)",
+        help="numbers of aircraft (default: 100 1000 3000)",
     )
     parser.add_argument(
         "--steps",
@@ -50,23 +55,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--trackers",
         choices=("both", "on", "off"),
-        default="both",
-        help="run with trackers, without, or both (default)",
+        default="on",
+        help="run with trackers (default), without (perfect surveillance), or both",
     )
     parser.add_argument("--json", metavar="PATH", help="also write the results as JSON")
-
-
-def steps_per_second(result) -> float:
-    """Steps per second from what ``bench_world`` returns (a number or a dict)."""
-    if isinstance(result, dict):
-        for key in ("steps_per_s", "steps_per_second", "sps"):
-            if key in result:
-                return float(result[key])
-        for key in ("seconds_per_step", "s_per_step"):
-            if key in result:
-                return 1.0 / float(result[key])
-        raise TypeError(f"bench_world returned a dict without steps per second: {sorted(result)}")
-    return float(result)
 
 
 def growth(rows: list[dict]) -> list[dict]:
@@ -75,7 +67,7 @@ def growth(rows: list[dict]) -> list[dict]:
     for trackers in dict.fromkeys(r["trackers"] for r in rows):
         rs = sorted((r for r in rows if r["trackers"] == trackers), key=lambda r: r["aircraft"])
         for a, b in zip(rs, rs[1:], strict=False):
-            ratio = a["steps_per_second"] / b["steps_per_second"]  # time per step, b over a
+            ratio = b["ms_per_step"] / a["ms_per_step"]
             n_ratio = b["aircraft"] / a["aircraft"]
             exponent = (
                 math.log(ratio) / math.log(n_ratio) if ratio > 0 and n_ratio > 1 else float("nan")
@@ -94,17 +86,28 @@ def growth(rows: list[dict]) -> list[dict]:
 
 def format_report(rows: list[dict], grow: list[dict]) -> str:
     lines = [
-        f"{'aircraft':>8}  {'trackers':>8}  {'steps/s':>10}  {'ms/step':>9}  "
-        f"{'aircraft-steps/s':>16}  {'tracks':>8}"
+        f"{'aircraft':>8}  {'trackers':>8}  {'tracks':>8}  {'world ms/step':>13}  "
+        f"{'IMM ms/step':>11}  {'world/IMM':>9}  {'CPU: world':>10}  {'IMM':>8}  {'ratio':>6}"
     ]
     for r in rows:
-        sps = r["steps_per_second"]
-        tracks = (r.get("raw") or {}).get("mean_tracks")
-        tracks = "-" if tracks is None else f"{tracks:.0f}"
-        lines.append(
-            f"{r['aircraft']:>8}  {('on' if r['trackers'] else 'off'):>8}  {sps:>10.1f}  "
-            f"{1000.0 / sps:>9.2f}  {sps * r['aircraft']:>16.0f}  {tracks:>8}"
+        imm = r.get("imm_ms_per_step")
+        head = (
+            f"{r['aircraft']:>8}  {('on' if r['trackers'] else 'off'):>8}  "
+            f"{r['tracks']:>8.0f}  {r['ms_per_step']:>13.2f}  "
         )
+        if imm is None:
+            tail = f"{'-':>11}  {'-':>9}  {r['cpu_ms_per_step']:>10.2f}  {'-':>8}  {'-':>6}"
+        else:
+            tail = (
+                f"{imm:>11.2f}  {r['ratio']:>9.2f}  {r['cpu_ms_per_step']:>10.2f}  "
+                f"{r['imm_cpu_ms_per_step']:>8.2f}  {r['cpu_ratio']:>6.2f}"
+            )
+        lines.append(head + tail)
+    lines.append(
+        "(medians over the timed steps, wall clock, then process CPU time, which other "
+        "processes on the machine disturb less; IMM: the bare step of the world's tracker "
+        "over the same number of tracks, same preset, timed right after in this process)"
+    )
     if grow:
         lines.append("")
         for g in grow:
@@ -117,23 +120,28 @@ def format_report(rows: list[dict], grow: list[dict]) -> str:
 
 
 def run(args) -> int:
-    try:
-        from airspace_sim.world.benchmark import bench_world
-    except ImportError as exc:
-        raise UserError(f"the world benchmark is not available ({exc})") from None
+    from airspace_sim.world.benchmark import bench_world
 
     settings = {"both": (False, True), "on": (True,), "off": (False,)}[args.trackers]
     rows = []
     for trackers in settings:
         for n in args.sizes:
-            result = bench_world(n, args.steps, trackers)
+            r = bench_world(n, args.steps, trackers)
+            imm = r.get("imm")
             rows.append(
                 {
                     "aircraft": n,
                     "trackers": trackers,
                     "steps": args.steps,
-                    "steps_per_second": steps_per_second(result),
-                    "raw": result if isinstance(result, dict) else None,
+                    "tracks": r["mean_tracks"],
+                    "ms_per_step": r["ms_per_step"],
+                    "cpu_ms_per_step": r["cpu_ms_per_step"],
+                    "steps_per_second": r["steps_per_s"],
+                    "imm_ms_per_step": None if imm is None else imm["ms_per_step"],
+                    "imm_cpu_ms_per_step": None if imm is None else imm["cpu_ms_per_step"],
+                    "imm_kernel": None if imm is None else imm["kernel"],
+                    "ratio": r.get("ratio"),
+                    "cpu_ratio": r.get("cpu_ratio"),
                 }
             )
     grow = growth(rows)

@@ -185,7 +185,7 @@ class AirspaceParallelEnv(ParallelEnv):
         self._max_rate = {a: float(w.max_turn_rate[self._index[a]]) for a in self.possible_agents}
         self.observation_layout = sp.ObservationLayout(
             n_intruders=int(n_intruders),
-            n_modes=live_tracks(w).mu.shape[1],
+            n_modes=w.tracks.n_modes,
             sensor_range=w.sensor_range,
             r_safe=w.r_safe,
             lookahead=lookahead_s(w),

@@ -1,20 +1,26 @@
 """Numba kernels of the batched IMM (paper §IV). Internal: use :class:`airspace_sim.tracking.IMM`.
 
 :func:`imm_step_kernel` returns the step kernel (``M`` modes, ``n`` states, ``m``
-measurement components, ``B`` trackers). The mode-conditioned state lives in a chunked
-structure-of-arrays layout, ``(C, ..., W)`` with ``C = ceil(B / W)`` chunks of ``W``
-trackers (tracker index last). Each step of the IMM cycle is a set of loops whose innermost
-loop runs over the ``W`` trackers of a chunk — LLVM turns it into SIMD code, one tracker per
-lane — with the model sizes as (run-time) outer loop bounds and ``W`` a compile-time
-constant. Work buffers are allocated once per call; the combined estimate and the
-per-tracker diagnostics are written out in the usual (B, ...) layout.
+measurement components). The mode-conditioned state lives in *slots* of a chunked
+structure-of-arrays layout, ``(C, ..., W)``: ``C`` chunks of ``W`` lanes, slot ``s`` in
+chunk ``s // W``, lane ``s % W`` (:class:`airspace_sim.tracking.imm.SlotIMM` owns it).
+Each step of the IMM cycle is a set of loops whose innermost loop runs over the ``W``
+lanes of a chunk — LLVM turns it into SIMD code, one tracker per lane — with the model
+sizes as (run-time) outer loop bounds and ``W`` a compile-time constant. Work buffers are
+allocated once per call; the combined estimate and the per-tracker diagnostics are
+written out by slot, in the usual (capacity, ...) layout.
+
+Free slots: an ``alive`` mask (capacity,) marks the live lanes. A chunk without a live
+lane is skipped. A free lane inside a live chunk is computed with the others (the SIMD
+lanes are there anyway) as a prediction without measurement from its own stored state, but
+nothing of it is written back: its state stays what it was when it was freed (benign
+values, set by the owner), so however many steps pass it can neither grow nor become NaN,
+and its outputs are left as they are.
 
 Determinism: no ``fastmath`` (so no reassociation and no FMA contraction) and no parallel
 reduction. Every lane does the same sequence of IEEE operations on its own tracker's data
 (``exp``/``log`` are scalar libm calls per tracker), so a tracker's result is the same bits
-whichever chunk or lane it lands in, whatever the batch, run after run. Lanes past the end
-of the batch in the last chunk hold a copy of the chunk's first tracker (fed its
-measurement, so they stay copies) and are never written out.
+whichever slot it lands in, whatever the other slots hold, run after run.
 
 Transition matrices are also passed as the list of their non-zero entries: the
 coordinated-turn matrices are mostly zeros, and ``F P Fᵀ`` over the non-zeros only is 2–3×
@@ -101,37 +107,36 @@ def _inv_logdet(S, Si, logdet, L, Li, want_log):
                     Si[j, i, w] = s
 
 
-def _make_imm_step(Mc, nc, mc, W):
-    """The IMM step for chunk width W and, unless 0, fixed sizes M = Mc, n = nc, m = mc.
+def _make_imm_step(W):
+    """The IMM step for chunk width W.
 
-    Closure variables are compile-time constants for numba: with W fixed the innermost
-    loops (over the W trackers of a chunk) have a constant trip count and vectorise
-    without remainder loops."""
+    W is a closure variable, so a compile-time constant for numba: the innermost loops
+    (over the W lanes of a chunk) have a constant trip count and vectorise without
+    remainder loops."""
 
     @njit(cache=True, error_model="numpy")
     def imm_step(
         Fr, Fc, Fv, Fnnz, Q, U, Hr, Hc, Hv, R, Pi, gate_d2,
-        z, xs, Ps, mus,
-        xs_o, Ps_o, mus_o, x_o, P_o, mu_o, nis_o, ll_o, gated_o,
+        z, alive, xs, Ps, mus,
+        x_o, P_o, mu_o, nis_o, ll_o, gated_o,
     ):  # fmt: skip
-        """One IMM cycle (paper §IV, steps 1–5) for every tracker.
+        """One IMM cycle (paper §IV, steps 1–5) for every live slot.
 
         Model: Fr, Fc, Fv (M, K) row, column and value of the non-zeros of each F_j (the
         first Fnnz[j] of them); Q (M, n, n) symmetric; U (M, n) offsets; Hr, Hc, Hv (KH,)
         the non-zeros of H (m, n); R (m, m) symmetric positive definite; Pi (M, M)
         row-stochastic; gate_d2 the chi-square gate on d² (``inf``: no gate).
 
-        State in (read only), chunked structure-of-arrays, C = ceil(B / W) chunks, lanes
-        past B copies of their chunk's first tracker: xs (C, M, n, W) mode-conditioned
-        states, Ps (C, M, n, n, W) their covariances (upper triangle read), mus (C, M, W)
-        mode probabilities. Measurements z (B, m).
-        Out (written, must not alias the inputs): xs_o, Ps_o, mus_o like the state;
-        x_o (B, n), P_o (B, n, n), mu_o (B, M), nis_o (B,), ll_o (B, M), gated_o (B,) bool.
+        State, chunked structure-of-arrays of C chunks (capacity B = C·W slots), updated in
+        place in the live lanes: xs (C, M, n, W) mode-conditioned states, Ps (C, M, n, n, W)
+        their covariances (upper triangle read), mus (C, M, W) mode probabilities.
+        alive (B,) bool: live slots. Measurements z (B, m) by slot (free slots' rows are
+        not read). Out, written in the live slots only: x_o (B, n), P_o (B, n, n),
+        mu_o (B, M), nis_o (B,), ll_o (B, M), gated_o (B,) bool.
         """
-        B = z.shape[0]
-        M = xs.shape[1] if Mc == 0 else Mc
-        n = xs.shape[2] if nc == 0 else nc
-        m = z.shape[1] if mc == 0 else mc
+        M = xs.shape[1]
+        n = xs.shape[2]
+        m = z.shape[1]
         nH = Hr.shape[0]
         half_m_log2pi = 0.5 * m * _LOG_2PI
 
@@ -166,22 +171,29 @@ def _make_imm_step(Mc, nc, mc, W):
         D = np.empty((n, W))
         xc = np.empty((n, W))
         Pc = np.empty((n, n, W))
+        # the chunk's new state, copied into the state arrays (live lanes) at the end
+        XP = np.empty((M, n, W))
+        PP = np.empty((M, n, n, W))
+        mun = np.empty((M, W))
+        live = np.empty(W, dtype=np.bool_)
 
-        for ch in range((B + W - 1) // W):
+        for ch in range(xs.shape[0]):
             b0 = ch * W
-            nb = min(W, B - b0)
+            nl = 0
+            for w in range(W):
+                live[w] = alive[b0 + w]
+                if live[w]:
+                    nl += 1
+            if nl == 0:
+                continue  # a free chunk costs nothing
             X = xs[ch]
             Pin = Ps[ch]
             mu_c = mus[ch]
-            XP = xs_o[ch]
-            PP = Ps_o[ch]
-            mun = mus_o[ch]
-            # ---- measurements of the chunk (lanes past the end: the chunk's first tracker's)
+            # ---- measurements of the chunk (free lanes: none, and a finite dummy value)
             for w in range(W):
-                b = b0 + w if w < nb else b0
-                ok = True
+                ok = live[w]
                 for a in range(m):
-                    zc[a, w] = z[b, a]
+                    zc[a, w] = z[b0 + w, a] if live[w] else 0.0
                     if not math.isfinite(zc[a, w]):
                         ok = False
                 have[w] = ok
@@ -324,9 +336,8 @@ def _make_imm_step(Mc, nc, mc, W):
                     if d2[j, w] <= gate_d2 and cbar[j, w] > 0.0:
                         g = False
                 use[w] = have[w] and not g
-                gated_o_w = have[w] and g
-                if w < nb:
-                    gated_o[b0 + w] = gated_o_w
+                if live[w]:
+                    gated_o[b0 + w] = have[w] and g
 
             # ---- mixture innovation NIS with the predicted mode probabilities c̄
             for a in range(m):
@@ -462,8 +473,24 @@ def _make_imm_step(Mc, nc, mc, W):
                         for w in range(W):
                             Pc[k, l, w] += mun[j, w] * (D[k, w] * D[l, w] + PP[j, k, l, w])
 
+            # ---- the new state of the live lanes (free lanes keep theirs)
+            if nl == W:
+                X[:] = XP
+                Pin[:] = PP
+                mu_c[:] = mun
+            else:
+                for w in range(W):
+                    if live[w]:
+                        for j in range(M):
+                            mu_c[j, w] = mun[j, w]
+                            for k in range(n):
+                                X[j, k, w] = XP[j, k, w]
+                                for l in range(n):
+                                    Pin[j, k, l, w] = PP[j, k, l, w]
             # ---- scatter the chunk
-            for w in range(nb):
+            for w in range(W):
+                if not live[w]:
+                    continue
                 b = b0 + w
                 nis_o[b] = nis[w] if have[w] else np.nan
                 for j in range(M):
@@ -477,21 +504,15 @@ def _make_imm_step(Mc, nc, mc, W):
     return imm_step
 
 
-_STEP_KERNELS: dict = {}
+_STEP_KERNEL = []
 
 
-def imm_step_kernel(M: int = 0, n: int = 0, m: int = 0, chunk: int = CHUNK):
-    """The IMM step kernel.
-
-    By default (``M = n = m = 0``) one kernel serves every model size, with the sizes read
-    from the arrays at run time and only the chunk width fixed, so numba compiles it once.
-    Fixing the sizes too makes a kernel with constant trip counts everywhere; it gives the
-    same bits, about 10 % faster, at the price of another (long) compilation per size.
-    """
-    key = (int(M), int(n), int(m), int(chunk))
-    if key not in _STEP_KERNELS:
-        _STEP_KERNELS[key] = _make_imm_step(*key)
-    return _STEP_KERNELS[key]
+def imm_step_kernel():
+    """The IMM step kernel: one for every model size (the sizes are read from the arrays
+    at run time; only the chunk width :data:`CHUNK` is fixed), compiled once."""
+    if not _STEP_KERNEL:
+        _STEP_KERNEL.append(_make_imm_step(CHUNK))
+    return _STEP_KERNEL[0]
 
 
 @njit(cache=True, error_model="numpy")

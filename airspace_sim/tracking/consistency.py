@@ -22,6 +22,7 @@ from scipy import stats
 
 from airspace_sim.dynamics import models, presets
 from airspace_sim.dynamics.truth import simulate
+from airspace_sim.tracking.initialisation import two_point_initialisation
 from airspace_sim.tracking.kalman import KalmanFilter
 
 #: CV Kalman filter σ_a grid (m/s²) searched for the best-tuned baseline.
@@ -67,33 +68,6 @@ def chi2_band(dof: int, n_runs: int = 1, prob: float = 0.95) -> tuple[float, flo
     k = dof * n_runs
     lo, hi = stats.chi2.ppf([(1 - prob) / 2, (1 + prob) / 2], k)
     return float(lo / n_runs), float(hi / n_runs)
-
-
-def two_point_initialisation(z0, z1, dt: float, R, turn_rates, mu0):
-    """State and covariance from two position measurements (Bar-Shalom et al. 2001, §5.5.3).
-
-    Position ``z1``, velocity ``(z1 − z0)/ΔT``; per axis
-    ``P = [[r, r/ΔT], [r/ΔT, 2r/ΔT²]]`` (cross-axis terms from R's off-diagonal likewise).
-    Ω starts at the mode-weighted rate ``Σ μ_j ω_j`` with the spread of the rates as its
-    variance (floored at (10⁻³ rad/s)² to keep P0 definite). Returns (B, 5), (B, 5, 5).
-    """
-    z0, z1 = np.atleast_2d(z0), np.atleast_2d(z1)
-    R = np.asarray(R, dtype=float)
-    B = z0.shape[0]
-    x0 = np.zeros((B, models.N_STATE))
-    x0[:, [0, 2]] = z1
-    x0[:, [1, 3]] = (z1 - z0) / dt
-    rates, mu = np.asarray(turn_rates, dtype=float), np.asarray(mu0, dtype=float)
-    w_mean = float(mu @ rates)
-    x0[:, 4] = w_mean
-    P0 = np.zeros((models.N_STATE, models.N_STATE))
-    pos, vel = list(models.POSITION), list(models.VELOCITY)
-    P0[np.ix_(pos, pos)] = R
-    P0[np.ix_(pos, vel)] = R / dt
-    P0[np.ix_(vel, pos)] = R / dt
-    P0[np.ix_(vel, vel)] = 2 * R / dt**2
-    P0[4, 4] = max(float(mu @ (rates - w_mean) ** 2), 1e-6)
-    return x0, np.broadcast_to(P0, (B, 5, 5)).copy()
 
 
 @dataclass
@@ -196,7 +170,12 @@ def monte_carlo(
     Z, X = tr.measurements, tr.states
     R = models.measurement_noise(p.measurement_sigma)
     mu0 = p.mu0()
-    x0, P0 = two_point_initialisation(Z[0], Z[1], p.dt, R, p.turn_rates, mu0)
+    # Ω starts at the mode-weighted rate Σ μ_j ω_j with the spread of the rates as its
+    # variance (floored at (10⁻³ rad/s)² to keep P0 definite)
+    rates = np.asarray(p.turn_rates, dtype=float)
+    omega = float(mu0 @ rates)
+    omega_var = max(float(mu0 @ (rates - omega) ** 2), 1e-6)
+    x0, P0 = two_point_initialisation(Z[0], Z[1], p.dt, R, omega, omega_var)
     steps = np.arange(2, n_steps)
     ev = steps >= 2 + burn_in  # evaluated steps
     pv = [0, 1, 2, 3]

@@ -34,19 +34,25 @@ zero unless it is negligible against the best mode's (filterpy instead floors ``
 ``sys.float_info.min``, after which μ silently equals c̄). A mode that cannot be reached
 (``c̄_j = 0``) keeps its own estimate in the mixing step and keeps ``μ_j = 0``.
 
+Storage
+-------
+:class:`SlotIMM` holds the filters in stable slots of the kernel's chunked
+structure-of-arrays layout (a free list, an alive mask, geometric growth): births and drops
+cost O(tracks that change) and the step skips free chunks. :class:`IMM` is the dense view
+(rows 0..B−1, ``append``/``remove`` keeping the order of the rest) over it.
+
 Units are whatever the model uses; in this project SI (m, m/s, rad/s), state
 ``[x, vx, y, vy, Ω]``.
 """
 
 from __future__ import annotations
 
-import sys
-
 import numpy as np
 
 from airspace_sim.dynamics.markov import validate_transition_matrix
 from airspace_sim.errors import UserError
 from airspace_sim.tracking import _codegen, _kernels
+from airspace_sim.tracking.slots import Slots
 
 #: Default gate: a measurement is dropped when it lies outside the 1 − 10⁻⁶ chi-square
 #: region of every mode (d² > 27.6 for m = 2): an in-model measurement is dropped
@@ -100,36 +106,6 @@ def _check_psd(a: np.ndarray, name: str, strict: bool) -> None:
         raise UserError(f"IMM {name}: not {kind}{where}: smallest eigenvalue {w[i, 0]!r}")
 
 
-def _pack(a: np.ndarray, W: int) -> np.ndarray:
-    """(B, ...) → chunked structure-of-arrays (C, ..., W), C = ceil(B / W); the lanes past B
-    are copies of the last chunk's first row."""
-    B = a.shape[0]
-    C = -(-B // W)
-    idx = np.arange(C * W)
-    if C:
-        idx[B:] = (C - 1) * W
-    ap = a[idx].reshape((C, W) + a.shape[1:])
-    return np.ascontiguousarray(np.moveaxis(ap, 1, -1))
-
-
-def _unpack(s: np.ndarray, B: int) -> np.ndarray:
-    """Inverse of :func:`_pack`: (C, ..., W) → (B, ...)."""
-    a = np.moveaxis(s, -1, 1).reshape((s.shape[0] * s.shape[-1],) + s.shape[1:-1])
-    return np.ascontiguousarray(a[:B])
-
-
-def _reusable(obj, name: str) -> np.ndarray:
-    """``getattr(obj, name)`` if only ``obj`` refers to that array, else a new empty one like it.
-
-    Refcount of an array referred to only by the attribute: the attribute, the local ``a`` and
-    getrefcount's own argument, 3. Any live view or reference elsewhere makes it larger.
-    """
-    a = getattr(obj, name)
-    if sys.getrefcount(a) <= 3:
-        return a
-    return np.empty_like(a)
-
-
 def _nonzeros(mats: np.ndarray):
     """Row, column, value of the non-zeros of each (k, l) matrix in ``mats`` (G, k, l), padded."""
     G = mats.shape[0]
@@ -144,57 +120,49 @@ def _nonzeros(mats: np.ndarray):
     return rows, cols, vals, nnz
 
 
-class IMM:
-    """Batched IMM estimator: ``B`` independent trackers sharing one jump-Markov model.
+def _ro(a: np.ndarray) -> np.ndarray:
+    v = a.view()
+    v.flags.writeable = False
+    return v
 
-    Parameters
-    ----------
-    transitions : (M, n, n)
-        Mode transition matrices ``F_j``.
-    process_noise : (M, n, n) or (n, n)
-        Process-noise covariances ``Q_j`` (symmetric, positive semi-definite).
-    measurement_matrix : (m, n)
-        ``H``.
-    measurement_noise : (m, m)
-        ``R`` (symmetric, positive definite).
-    transition_matrix : (M, M)
-        Mode chain ``Π``; row i = ``Pr(next mode | mode i)`` (rows sum to 1).
-    x0 : (B, n)
-        Initial state of each tracker; every mode starts from it.
-    P0 : (B, n, n) or (n, n)
-        Initial covariance (symmetric positive definite); every mode starts from it.
-    mu0 : (B, M) or (M,)
-        Initial mode probabilities (non-negative, rows sum to 1).
-    offsets : (M, n), optional
-        Per-mode additive term ``u_j``: mode j predicts ``x' = F_j x + u_j``.
-    gate_probability : float in (0, 1]
-        Chi-square gate (``m`` degrees of freedom) on every mode's ``d²``; 1 disables
-        gating. Default :data:`DEFAULT_GATE_PROBABILITY` = 1 − 10⁻⁶.
-    kernel : {"auto", "generated", "loops"}
-        How the step runs. ``"generated"``: straight-line code written for this model's
-        sizes and sparsity (:mod:`._codegen`), 1.5–2.5× faster, compiled once per model
-        structure (~20 s for 3 modes × 5 states, then loaded from the disk cache).
-        ``"loops"``: one kernel for every model size (:mod:`._kernels`). Both give the
-        same bits. ``"auto"`` (default) generates unless the code would be slow to
-        compile (over :data:`._codegen.AUTO_MAX_PRODUCTS` multiplications, e.g. dense
-        6-state models); the choice made is in the attribute ``kernel``.
 
-    Attributes (all read-only views; a step replaces them, never mutates them)
-    ---------------------------------------------------------------------------
-    x (B, n), P (B, n, n), mu (B, M)
-        Combined posterior (paper §IV step 5) and mode probabilities (step 4).
-    x_modes (B, M, n), P_modes (B, M, n, n)
-        Mode-conditioned posteriors (step 3).
-    nis (B,)
-        Last step's normalised innovation squared of the mixture innovation
-        ``ν = z − Σ_j c̄_j ẑ_j`` with ``S = Σ_j c̄_j [S_j + (ẑ_j − ẑ)(ẑ_j − ẑ)ᵀ]``; NaN where
-        there was no measurement, computed (typically large) where it was gated.
-    log_likelihood (B, M)
-        Last step's ``log N(z; ẑ_j, S_j)`` per mode; NaN where there was no measurement,
-        computed (but not used) where the measurement was gated, NaN for a mode whose
-        ``d²`` is not finite.
-    gated (B,) bool
-        Last step's measurement was finite but outside every mode's gate (predict only).
+def _combine(xm, Pm, mu):
+    """Combined estimate Σ_j μ_j x_j and its covariance, (k, M, n), (k, M, n, n), (k, M)."""
+    x = np.einsum("bj,bjk->bk", mu, xm)
+    d = xm - x[:, None, :]
+    P = np.einsum("bj,bjkl->bkl", mu, Pm + d[..., :, None] * d[..., None, :])
+    P = 0.5 * (P + np.swapaxes(P, -1, -2))
+    return np.ascontiguousarray(x), np.ascontiguousarray(P)
+
+
+class SlotIMM:
+    """IMM filters (paper §IV) in stable slots of the kernel's structure-of-arrays layout.
+
+    The storage of every IMM in the project: :class:`IMM` is a dense view over it and the
+    world's ``"imm"`` tracker uses it directly. Model parameters as for :class:`IMM`
+    (``transitions`` … ``kernel``); ``capacity`` lanes are allocated at first (rounded up
+    to whole chunks), none live.
+
+    Slots
+    -----
+    Lane ``s`` lives in chunk ``s // W``, lane ``s % W`` of ``xs (C, M, n, W)``,
+    ``Ps (C, M, n, n, W)`` (the generated kernel stores the upper triangles,
+    ``(C, M, n(n+1)/2, W)``) and ``mus (C, M, W)``, with ``W`` the kernel's chunk width and
+    ``C·W = capacity``. :meth:`birth` writes free lanes, :meth:`drop` frees lanes (the free
+    list is :class:`~airspace_sim.tracking.slots.Slots`); no other lane is read or written,
+    so both cost O(k) for k tracks. When no lane is free the capacity at least doubles (one
+    O(capacity) copy, amortised). :meth:`step` skips chunks without a live lane; a free
+    lane in a live chunk holds a fixed benign state (x = 0, P = I, uniform μ, written when it
+    is freed) and is never written by the kernel, so it costs no repack and cannot overflow
+    or turn NaN however long it stays free.
+
+    Outputs and ownership
+    ---------------------
+    ``x (capacity, n)``, ``P (capacity, n, n)``, ``mu``, ``nis``, ``log_likelihood``,
+    ``gated`` and ``alive`` are read-only views of this object's own buffers, by slot; free
+    slots hold NaN (``gated``: False). The buffers are overwritten in place by the next
+    :meth:`step`, :meth:`birth` or :meth:`drop` and replaced when the capacity grows: a view
+    is valid until then. Copy what you keep.
     """
 
     def __init__(
@@ -204,12 +172,10 @@ class IMM:
         measurement_matrix,
         measurement_noise,
         transition_matrix,
-        x0,
-        P0,
-        mu0,
         offsets=None,
         gate_probability: float = DEFAULT_GATE_PROBABILITY,
         kernel: str = "auto",
+        capacity: int = 0,
     ):
         F = _array(transitions, "transitions", 3)
         M, n, n2 = F.shape
@@ -265,15 +231,24 @@ class IMM:
         if kernel not in ("auto", "generated", "loops"):
             raise UserError(f"IMM kernel: expected 'auto', 'generated' or 'loops', got {kernel!r}")
         self._choose_kernel(kernel)
-
-        x0, P0, mu0 = self._initial(x0, P0, mu0, "")
-        B = x0.shape[0]
-        xm = np.ascontiguousarray(np.broadcast_to(x0[:, None, :], (B, M, n)))
-        Pm = np.ascontiguousarray(np.broadcast_to(P0[:, None], (B, M, n, n)))
-        # combined estimate as filterpy's constructor makes it (Σ μ_j x_j with equal x_j)
-        x, P = self._combine(xm, Pm, mu0)
-        self._set_state(xm, Pm, mu0, x, P, np.full(B, np.nan), np.full((B, M), np.nan),
-                        np.zeros(B, dtype=bool))  # fmt: skip
+        self._tri_k, self._tri_l = np.triu_indices(n)
+        W = self._W
+        self._slots = Slots(W)
+        pshape = (len(self._tri_k),) if self._tri else (n, n)
+        self._xs = np.zeros((0, M, n, W))
+        self._Ps = np.zeros((0, M) + pshape + (W,))
+        self._mus = np.zeros((0, M, W))
+        # a free lane's state: finite, and stays finite under a prediction without update
+        eye = np.eye(n)
+        self._free_P = eye[self._tri_k, self._tri_l] if self._tri else eye
+        self._x = np.zeros((0, n))
+        self._P = np.zeros((0, n, n))
+        self._mu = np.zeros((0, M))
+        self._nis = np.zeros(0)
+        self._ll = np.zeros((0, M))
+        self._gated = np.zeros(0, dtype=bool)
+        if capacity:
+            self._grow(self._slots.capacity_for(int(capacity)))
 
     # ------------------------------------------------------------------ helpers
     def _choose_kernel(self, kernel: str) -> None:
@@ -290,53 +265,42 @@ class IMM:
 
     def __getstate__(self) -> dict:
         # the kernel is a compiled function (the generated one from a cache-directory
-        # module): pickle the choice, and find or compile the kernel again on unpickling
+        # module): pickle the choice made, and find the same kernel again on unpickling
         state = self.__dict__.copy()
         del state["_kernel"]
         return state
 
     def __setstate__(self, state: dict) -> None:
-        # (defaults: the layout of objects pickled before there was a choice of kernel)
-        state = {"kernel": "loops", "_W": _kernels.CHUNK, "_tri": False, **state}
-        state.pop("_kernel", None)
         self.__dict__.update(state)
-        layout = (self._W, self._tri)
-        xm, Pm = self.x_modes, self.P_modes  # in the pickled layout
         self._choose_kernel(self.kernel)
-        if (self._W, self._tri) != layout:  # e.g. another version's chunk width: repack
-            self._set_state(np.asarray(xm), np.asarray(Pm), self._mu, self._x, self._P,
-                            self._nis, self._ll, self._gated)  # fmt: skip
 
-    def _pack_P(self, Pm: np.ndarray) -> np.ndarray:
-        """(B, M, n, n) → the kernel's layout (C, M, n, n, W), or (C, M, T, W) with the
-        upper triangles (row-major) for the generated kernel."""
-        if self._tri:
-            k, l = np.triu_indices(self.n)
-            Pm = Pm[..., k, l]
-        return _pack(Pm, self._W)
+    def _grow(self, capacity: int) -> None:
+        """Reallocate every per-slot array to ``capacity`` lanes (new lanes free)."""
+        old = self._slots.capacity
+        if capacity <= old:
+            return
+        W, M, n = self._W, self.M, self.n
+        C0, C = old // W, capacity // W
 
-    def _unpack_P(self) -> np.ndarray:
-        """Inverse of :meth:`_pack_P`: (B, M, n, n)."""
-        a = _unpack(self._Ps, self._B)
-        if not self._tri:
-            return a
-        k, l = np.triu_indices(self.n)
-        P = np.empty(a.shape[:2] + (self.n, self.n))
-        P[..., k, l] = a
-        P[..., l, k] = a
-        return P
+        def grown(a, fill, lanes_last):
+            shape = ((C,) + a.shape[1:]) if lanes_last else ((capacity,) + a.shape[1:])
+            b = np.empty(shape, dtype=a.dtype)
+            k = C0 if lanes_last else old
+            b[:k] = a
+            b[k:] = fill
+            return b
 
-    def _set_state(self, xm, Pm, mu, x, P, nis, ll, gated):
-        """Store a state given in (B, ...) arrays. The mode-conditioned state lives in the
-        kernel's chunked structure-of-arrays layout; x_modes/P_modes unpack it on demand."""
-        W = self._W
-        self._B = x.shape[0]
-        self._xs, self._Ps, self._mus = _pack(xm, W), self._pack_P(Pm), _pack(mu, W)
-        # the loops kernel's output buffers, allocated at its first step (then ping-pong)
-        self._spare = None
-        self._xm_cache, self._Pm_cache = xm, Pm
-        self._mu, self._x, self._P = mu, x, P
-        self._nis, self._ll, self._gated = nis, ll, gated
+        self._xs = grown(self._xs, 0.0, True)
+        self._Ps = grown(self._Ps, self._free_P[None, ..., None], True)
+        self._mus = grown(self._mus, 1.0 / M, True)
+        self._x = grown(self._x, np.nan, False)
+        self._P = grown(self._P, np.nan, False)
+        self._mu = grown(self._mu, np.nan, False)
+        self._nis = grown(self._nis, np.nan, False)
+        self._ll = grown(self._ll, np.nan, False)
+        self._gated = grown(self._gated, False, False)
+        self._slots.grow(capacity)
+        assert self._xs.shape == (C, M, n, W)
 
     def _initial(self, x0, P0, mu0, where: str):
         n, M = self.n, self.M
@@ -368,69 +332,326 @@ class IMM:
         mu0 = np.ascontiguousarray(mu0 / sums[:, None])
         return x0, P0, mu0
 
-    @staticmethod
-    def _combine(xm, Pm, mu):
-        x = np.einsum("bj,bjk->bk", mu, xm)
-        d = xm - x[:, None, :]
-        P = np.einsum("bj,bjkl->bkl", mu, Pm + d[..., :, None] * d[..., None, :])
-        P = 0.5 * (P + np.swapaxes(P, -1, -2))
-        return np.ascontiguousarray(x), np.ascontiguousarray(P)
+    def _lanes(self, slots):
+        return np.divmod(np.asarray(slots, dtype=np.int64), self._W)
 
-    @staticmethod
-    def _ro(a: np.ndarray) -> np.ndarray:
-        v = a.view()
-        v.flags.writeable = False
-        return v
+    def _write(self, slots, x0, P0, mu0) -> None:
+        """Start validated tracks (k, n), (k, n, n), (k, M) in the live lanes ``slots``."""
+        k = x0.shape[0]
+        M, n = self.M, self.n
+        c, w = self._lanes(slots)
+        self._xs[c, :, :, w] = x0[:, None, :]
+        if self._tri:
+            self._Ps[c, :, :, w] = P0[:, None, self._tri_k, self._tri_l]
+        else:
+            self._Ps[c, :, :, :, w] = P0[:, None]
+        self._mus[c, :, w] = mu0
+        # combined estimate as filterpy's constructor makes it (Σ μ_j x_j with equal x_j)
+        xm = np.broadcast_to(x0[:, None, :], (k, M, n))
+        Pm = np.broadcast_to(P0[:, None], (k, M, n, n))
+        self._x[slots], self._P[slots] = _combine(xm, Pm, mu0)
+        self._mu[slots] = mu0
+        self._nis[slots] = np.nan
+        self._ll[slots] = np.nan
+        self._gated[slots] = False
 
     # --------------------------------------------------------------- properties
     @property
+    def capacity(self) -> int:
+        """Number of lanes allocated (a multiple of the kernel's chunk width)."""
+        return self._slots.capacity
+
+    @property
+    def n_live(self) -> int:
+        """Number of live slots."""
+        return self._slots.n_live
+
+    @property
+    def alive(self) -> np.ndarray:
+        """(capacity,) bool, read-only: live slots."""
+        return _ro(self._slots.alive)
+
+    @property
+    def x(self) -> np.ndarray:
+        """(capacity, n) combined posterior states by slot (paper §IV step 5)."""
+        return _ro(self._x)
+
+    @property
+    def P(self) -> np.ndarray:
+        """(capacity, n, n) combined posterior covariances by slot (paper §IV step 5)."""
+        return _ro(self._P)
+
+    @property
+    def mu(self) -> np.ndarray:
+        """(capacity, M) mode probabilities by slot (paper §IV step 4)."""
+        return _ro(self._mu)
+
+    @property
+    def nis(self) -> np.ndarray:
+        """(capacity,) last step's mixture NIS by slot (see :class:`IMM`)."""
+        return _ro(self._nis)
+
+    @property
+    def log_likelihood(self) -> np.ndarray:
+        """(capacity, M) last step's per-mode log-likelihoods by slot (see :class:`IMM`)."""
+        return _ro(self._ll)
+
+    @property
+    def gated(self) -> np.ndarray:
+        """(capacity,) bool: last step's finite measurement was rejected by the gate."""
+        return _ro(self._gated)
+
+    # ------------------------------------------------------------------ methods
+    def birth(self, x0, P0, mu0) -> np.ndarray:
+        """Start k tracks in free lanes; return their slots (k,) int64.
+
+        x0 (k, n), P0 (k, n, n) or (n, n), mu0 (k, M) or (M,) (validated as in
+        :class:`IMM`). Every mode starts from (x0, P0); ``nis``/``log_likelihood`` are NaN
+        and ``gated`` False until their first step. O(k), plus an amortised growth.
+        """
+        x0, P0, mu0 = self._initial(x0, P0, mu0, "birth ")
+        return self._birth_valid(x0, P0, mu0)
+
+    def _birth_valid(self, x0, P0, mu0) -> np.ndarray:
+        k = x0.shape[0]
+        need = self._slots.capacity_for(k)
+        if need > self.capacity:
+            self._grow(need)
+        slots = self._slots.take(k)
+        if k:
+            self._write(slots, x0, P0, mu0)
+        return slots
+
+    def drop(self, slots) -> None:
+        """Free the live ``slots`` (k,) int: O(k); no other slot changes."""
+        s = self._slots.release(slots, "IMM drop")
+        if s.size == 0:
+            return
+        c, w = self._lanes(s)
+        self._xs[c, :, :, w] = 0.0
+        if self._tri:
+            self._Ps[c, :, :, w] = self._free_P
+        else:
+            self._Ps[c, :, :, :, w] = self._free_P
+        self._mus[c, :, w] = 1.0 / self.M
+        for a in (self._x, self._P, self._mu, self._nis, self._ll):
+            a[s] = np.nan
+        self._gated[s] = False
+
+    def step(self, z) -> None:
+        """One IMM cycle (paper §IV steps 1–5) for every live slot.
+
+        z : (capacity, m) measurements by slot; a row with any NaN/inf means no measurement
+        (predict only); rows of free slots are not read.
+        """
+        z = np.ascontiguousarray(z, dtype=float)
+        if z.shape != (self.capacity, self.m):
+            raise UserError(
+                f"IMM step: z must have shape {(self.capacity, self.m)} (by slot), got {z.shape}"
+            )
+        self._kernel(
+            self._Fr, self._Fc, self._Fv, self._Fnnz, self._Q, self._U,
+            self._Hr, self._Hc, self._Hv, self._R, self._Pi, self.gate_threshold,
+            z, self._slots.alive, self._xs, self._Ps, self._mus,
+            self._x, self._P, self._mu, self._nis, self._ll, self._gated,
+        )  # fmt: skip
+
+    def modes(self, slots):
+        """Mode-conditioned posteriors of ``slots`` (R,): x_modes (R, M, n), P_modes
+        (R, M, n, n) (paper §IV step 3), new arrays."""
+        c, w = self._lanes(slots)
+        xm = self._xs[c, :, :, w]
+        if not self._tri:
+            return xm, self._Ps[c, :, :, :, w]
+        a = self._Ps[c, :, :, w]
+        P = np.empty(a.shape[:2] + (self.n, self.n))
+        P[..., self._tri_k, self._tri_l] = a
+        P[..., self._tri_l, self._tri_k] = a
+        return xm, P
+
+    def predict_modes_at(self, steps, slots):
+        """Each mode's own model propagated ``steps`` (S,) positive increasing step counts
+        ahead, without mixing, for ``slots`` (R,): xs (R, M, S, n), Ps (R, M, S, n, n)
+        (:func:`airspace_sim.tracking.prediction.predict_modes_at`)."""
+        from airspace_sim.tracking.prediction import predict_modes_at
+
+        xm, Pm = self.modes(slots)
+        return predict_modes_at(self._F, self._Q, self._U, xm, Pm, steps)
+
+    def __repr__(self) -> str:
+        return (
+            f"SlotIMM(live={self.n_live}, capacity={self.capacity}, M={self.M}, n={self.n}, "
+            f"m={self.m}, kernel={self.kernel!r})"
+        )
+
+
+class IMM:
+    """Batched IMM estimator: ``B`` independent trackers sharing one jump-Markov model.
+
+    A dense view (rows ``0 .. B-1``) over :class:`SlotIMM`: row ``i`` is slot ``rows[i]``.
+
+    Parameters
+    ----------
+    transitions : (M, n, n)
+        Mode transition matrices ``F_j``.
+    process_noise : (M, n, n) or (n, n)
+        Process-noise covariances ``Q_j`` (symmetric, positive semi-definite).
+    measurement_matrix : (m, n)
+        ``H``.
+    measurement_noise : (m, m)
+        ``R`` (symmetric, positive definite).
+    transition_matrix : (M, M)
+        Mode chain ``Π``; row i = ``Pr(next mode | mode i)`` (rows sum to 1).
+    x0 : (B, n)
+        Initial state of each tracker; every mode starts from it.
+    P0 : (B, n, n) or (n, n)
+        Initial covariance (symmetric positive definite); every mode starts from it.
+    mu0 : (B, M) or (M,)
+        Initial mode probabilities (non-negative, rows sum to 1).
+    offsets : (M, n), optional
+        Per-mode additive term ``u_j``: mode j predicts ``x' = F_j x + u_j``.
+    gate_probability : float in (0, 1]
+        Chi-square gate (``m`` degrees of freedom) on every mode's ``d²``; 1 disables
+        gating. Default :data:`DEFAULT_GATE_PROBABILITY` = 1 − 10⁻⁶.
+    kernel : {"auto", "generated", "loops"}
+        How the step runs. ``"generated"``: straight-line code written for this model's
+        sizes and sparsity (:mod:`._codegen`), compiled once per model structure (~20 s
+        for 3 modes × 5 states, then loaded from the disk cache). ``"loops"``: one kernel
+        for every model size (:mod:`._kernels`). Both give the same bits. ``"auto"``
+        (default) generates unless the code would be slow to compile (over
+        :data:`._codegen.AUTO_MAX_PRODUCTS` multiplications, e.g. dense 6-state models);
+        the choice made is in the attribute ``kernel``.
+
+    Attributes
+    ----------
+    x (B, n), P (B, n, n), mu (B, M)
+        Combined posterior (paper §IV step 5) and mode probabilities (step 4).
+    x_modes (B, M, n), P_modes (B, M, n, n)
+        Mode-conditioned posteriors (step 3).
+    nis (B,)
+        Last step's normalised innovation squared of the mixture innovation
+        ``ν = z − Σ_j c̄_j ẑ_j`` with ``S = Σ_j c̄_j [S_j + (ẑ_j − ẑ)(ẑ_j − ẑ)ᵀ]``; NaN where
+        there was no measurement, computed (typically large) where it was gated.
+    log_likelihood (B, M)
+        Last step's ``log N(z; ẑ_j, S_j)`` per mode; NaN where there was no measurement,
+        computed (but not used) where the measurement was gated, NaN for a mode whose
+        ``d²`` is not finite.
+    gated (B,) bool
+        Last step's measurement was finite but outside every mode's gate (predict only).
+
+    Ownership: every array attribute is read-only and valid until the next :meth:`step`,
+    :meth:`append` or :meth:`remove`, which may overwrite it in place (it can be a view of
+    the slot storage's buffers). Copy what you keep across steps.
+    """
+
+    def __init__(
+        self,
+        transitions,
+        process_noise,
+        measurement_matrix,
+        measurement_noise,
+        transition_matrix,
+        x0,
+        P0,
+        mu0,
+        offsets=None,
+        gate_probability: float = DEFAULT_GATE_PROBABILITY,
+        kernel: str = "auto",
+    ):
+        s = SlotIMM(
+            transitions,
+            process_noise,
+            measurement_matrix,
+            measurement_noise,
+            transition_matrix,
+            offsets=offsets,
+            gate_probability=gate_probability,
+            kernel=kernel,
+        )
+        x0, P0, mu0 = s._initial(x0, P0, mu0, "")
+        self._s = s
+        self._rows = s._birth_valid(x0, P0, mu0)
+        self._identity = True  # rows == arange(B): dense arrays are slices of the slots'
+        self._cache: dict = {}
+        self._z = np.zeros((0, s.m))
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state["_cache"] = {}
+        state["_z"] = np.zeros((0, self._s.m))
+        return state
+
+    # --------------------------------------------------------------- properties
+    M = property(lambda self: self._s.M, doc="Number of modes.")
+    n = property(lambda self: self._s.n, doc="State dimension.")
+    m = property(lambda self: self._s.m, doc="Measurement dimension.")
+    kernel = property(lambda self: self._s.kernel, doc="The step kernel in use.")
+    gate_probability = property(lambda self: self._s.gate_probability)
+    gate_threshold = property(lambda self: self._s.gate_threshold, doc="Gate on d² (inf: none).")
+
+    @property
+    def slots(self) -> SlotIMM:
+        """The slot storage this is a view of."""
+        return self._s
+
+    @property
     def B(self) -> int:
         """Number of trackers."""
-        return self._B
+        return int(self._rows.size)
+
+    def _dense(self, name: str) -> np.ndarray:
+        a = getattr(self._s, name)
+        if self._identity:
+            return a[: self.B]
+        if name not in self._cache:
+            self._cache[name] = _ro(a[self._rows])
+        return self._cache[name]
 
     @property
     def x(self) -> np.ndarray:
         """Combined posterior state (B, n) (paper §IV step 5)."""
-        return self._ro(self._x)
+        return self._dense("x")
 
     @property
     def P(self) -> np.ndarray:
         """Combined posterior covariance (B, n, n) (paper §IV step 5)."""
-        return self._ro(self._P)
+        return self._dense("P")
 
     @property
     def mu(self) -> np.ndarray:
         """Mode probabilities (B, M) (paper §IV step 4)."""
-        return self._ro(self._mu)
-
-    @property
-    def x_modes(self) -> np.ndarray:
-        """Mode-conditioned posterior states (B, M, n) (paper §IV step 3)."""
-        if self._xm_cache is None:
-            self._xm_cache = _unpack(self._xs, self._B)
-        return self._ro(self._xm_cache)
-
-    @property
-    def P_modes(self) -> np.ndarray:
-        """Mode-conditioned posterior covariances (B, M, n, n) (paper §IV step 3)."""
-        if self._Pm_cache is None:
-            self._Pm_cache = self._unpack_P()
-        return self._ro(self._Pm_cache)
+        return self._dense("mu")
 
     @property
     def nis(self) -> np.ndarray:
         """Last step's mixture NIS (B,); NaN where no measurement (see class docstring)."""
-        return self._ro(self._nis)
+        return self._dense("nis")
 
     @property
     def log_likelihood(self) -> np.ndarray:
         """Last step's per-mode log-likelihoods (B, M); NaN where no measurement."""
-        return self._ro(self._ll)
+        return self._dense("log_likelihood")
 
     @property
     def gated(self) -> np.ndarray:
         """Last step: finite measurement rejected by the gate (B,) bool."""
-        return self._ro(self._gated)
+        return self._dense("gated")
+
+    def _modes(self):
+        if "modes" not in self._cache:
+            xm, Pm = self._s.modes(self._rows)
+            self._cache["modes"] = (_ro(xm), _ro(Pm))
+        return self._cache["modes"]
+
+    @property
+    def x_modes(self) -> np.ndarray:
+        """Mode-conditioned posterior states (B, M, n) (paper §IV step 3)."""
+        return self._modes()[0]
+
+    @property
+    def P_modes(self) -> np.ndarray:
+        """Mode-conditioned posterior covariances (B, M, n, n) (paper §IV step 3)."""
+        return self._modes()[1]
 
     # ------------------------------------------------------------------ methods
     def step(self, z) -> None:
@@ -441,66 +662,33 @@ class IMM:
         z : (B, m)
             Measurements; a row with any NaN/inf means no measurement (predict only).
         """
-        z = np.ascontiguousarray(z, dtype=float)
-        B = self._B
-        if z.shape != (B, self.m):
-            raise UserError(f"IMM.step: z must have shape {(B, self.m)}, got {z.shape}")
-        # The generated kernel reads each chunk's state before it writes it: it updates the
-        # state in place (half the memory traffic). The loops kernel writes into spare
-        # buffers, swapped with the state after the step.
-        inplace = self.kernel == "generated"
-        if inplace:
-            xs, Ps, mus = self._xs, self._Ps, self._mus
+        z = np.asarray(z, dtype=float)
+        B, s = self.B, self._s
+        if z.shape != (B, s.m):
+            raise UserError(f"IMM.step: z must have shape {(B, s.m)}, got {z.shape}")
+        if self._z.shape[0] != s.capacity:
+            self._z = np.zeros((s.capacity, s.m))
+        if self._identity:
+            self._z[:B] = z
         else:
-            if self._spare is None:
-                self._spare = tuple(np.empty_like(a) for a in (self._xs, self._Ps, self._mus))
-            xs, Ps, mus = self._spare
-        # New output arrays, except that last step's are reused when nothing outside this
-        # object refers to them (no view or reference handed out is still alive): arrays a
-        # caller holds are never overwritten, and a loop that only copies them allocates
-        # (and page-faults) nothing.
-        x = _reusable(self, "_x")
-        P = _reusable(self, "_P")
-        mu = _reusable(self, "_mu")
-        nis = _reusable(self, "_nis")
-        ll = _reusable(self, "_ll")
-        gated = _reusable(self, "_gated")
-        self._kernel(
-            self._Fr, self._Fc, self._Fv, self._Fnnz, self._Q, self._U,
-            self._Hr, self._Hc, self._Hv, self._R, self._Pi, self.gate_threshold,
-            z, self._xs, self._Ps, self._mus,
-            xs, Ps, mus, x, P, mu, nis, ll, gated,
-        )  # fmt: skip
-        if not inplace:
-            self._spare = (self._xs, self._Ps, self._mus)
-            self._xs, self._Ps, self._mus = xs, Ps, mus
-        self._xm_cache = self._Pm_cache = None
-        self._mu, self._x, self._P = mu, x, P
-        self._nis, self._ll, self._gated = nis, ll, gated
+            self._z[self._rows] = z
+        s.step(self._z)
+        self._cache.clear()
 
     def append(self, x0, P0, mu0) -> np.ndarray:
         """Add trackers at the end of the batch; return their row indices (k,) int.
 
         x0 (k, n), P0 (k, n, n) or (n, n), mu0 (k, M) or (M,), as in the constructor. Their
         ``nis``/``log_likelihood`` are NaN and ``gated`` False until their first step.
+        Cost O(k) in the slot storage (plus O(B) integers for the row order).
         """
-        x0, P0, mu0 = self._initial(x0, P0, mu0, "append ")
-        k = x0.shape[0]
-        B, M, n = self._B, self.M, self.n
-        xm = np.ascontiguousarray(np.broadcast_to(x0[:, None, :], (k, M, n)))
-        Pm = np.ascontiguousarray(np.broadcast_to(P0[:, None], (k, M, n, n)))
-        x, P = self._combine(xm, Pm, mu0)
-        self._set_state(
-            np.concatenate([self.x_modes, xm]),
-            np.concatenate([self.P_modes, Pm]),
-            np.concatenate([self._mu, mu0]),
-            np.concatenate([self._x, x]),
-            np.concatenate([self._P, P]),
-            np.concatenate([self._nis, np.full(k, np.nan)]),
-            np.concatenate([self._ll, np.full((k, M), np.nan)]),
-            np.concatenate([self._gated, np.zeros(k, dtype=bool)]),
-        )
-        return np.arange(B, B + k)
+        x0, P0, mu0 = self._s._initial(x0, P0, mu0, "append ")
+        B = self.B
+        slots = self._s._birth_valid(x0, P0, mu0)
+        self._identity = self._identity and bool(np.all(slots == np.arange(B, B + slots.size)))
+        self._rows = np.concatenate([self._rows, slots])
+        self._cache.clear()
+        return np.arange(B, B + slots.size)
 
     def remove(self, indices) -> None:
         """Drop the trackers at ``indices`` (int array-like, or a (B,) bool mask).
@@ -522,9 +710,10 @@ class IMM:
             raise UserError(f"IMM.remove: index out of range for {B} trackers: {idx.tolist()}")
         keep = np.ones(B, dtype=bool)
         keep[idx] = False
-        self._set_state(*(np.ascontiguousarray(a[keep]) for a in (
-            self.x_modes, self.P_modes, self._mu, self._x, self._P, self._nis, self._ll, self._gated
-        )))  # fmt: skip
+        self._s.drop(self._rows[~keep])
+        self._rows = self._rows[keep]
+        self._identity = bool(np.all(self._rows == np.arange(self._rows.size)))
+        self._cache.clear()
 
     def predict_modes(self, steps: int):
         """Each mode's own model propagated 1..steps steps ahead, without mixing.
@@ -541,11 +730,12 @@ class IMM:
                 f"IMM.predict_modes: steps must be a non-negative integer, got {steps!r}"
             )
         steps = int(steps)
-        B, M, n = self._B, self.M, self.n
+        s = self._s
+        B, M, n = self.B, s.M, s.n
         xs = np.empty((B, M, steps, n))
         Ps = np.empty((B, M, steps, n, n))
-        _kernels.predict_modes(self._F, self._Q, self._U, np.asarray(self.x_modes),
-                               np.asarray(self.P_modes), steps, xs, Ps)  # fmt: skip
+        xm, Pm = self._modes()
+        _kernels.predict_modes(s._F, s._Q, s._U, np.asarray(xm), np.asarray(Pm), steps, xs, Ps)
         return xs, Ps
 
     def predict_modes_at(self, steps, rows=None):
@@ -556,12 +746,11 @@ class IMM:
         ``predict_modes(max(steps))[:, :, steps - 1]`` to rounding, in R·M·S·n² memory
         (:mod:`airspace_sim.tracking.prediction`).
         """
-        from airspace_sim.tracking.prediction import predict_modes_at
-
-        xm, Pm = np.asarray(self.x_modes), np.asarray(self.P_modes)
-        if rows is not None:
-            xm, Pm = xm[rows], Pm[rows]
-        return predict_modes_at(self._F, self._Q, self._U, xm, Pm, steps)
+        slots = self._rows if rows is None else self._rows[np.asarray(rows)]
+        return self._s.predict_modes_at(steps, slots)
 
     def __repr__(self) -> str:
-        return f"IMM(B={self.B}, M={self.M}, n={self.n}, m={self.m}, gate_probability={self.gate_probability})"
+        return (
+            f"IMM(B={self.B}, M={self.M}, n={self.n}, m={self.m}, "
+            f"gate_probability={self.gate_probability})"
+        )

@@ -1,7 +1,8 @@
 """Batched linear Kalman filter: B independent trackers sharing one linear-Gaussian model.
 
 The single-model baseline for the IMM (a constant-velocity filter is the classic one) and
-the ``kalman`` tracker of the world. Same conventions as :class:`~airspace_sim.tracking.IMM`
+the ``kalman`` tracker plugin (``plugins/kalman_tracker.py``, through :func:`predict` and
+:func:`update`). Same conventions as :class:`~airspace_sim.tracking.IMM`
 (``docs/dev/CONTRACTS.md``): every array has the tracker axis first, one :meth:`step` is a
 predict followed by an update, a NaN measurement row means "no measurement: predict only".
 Everything is numpy over the batch axis (``matmul``/``einsum``); there is no Python loop
@@ -27,6 +28,41 @@ def _sym(P: np.ndarray) -> np.ndarray:
     return 0.5 * (P + np.swapaxes(P, -1, -2))
 
 
+def predict(x, P, F, Q, u):
+    """Time update of a batch: ``x ← F x + u``, ``P ← F P Fᵀ + Q``.
+
+    x (B, n), P (B, n, n), F, Q (n, n), u (n,); returns new (x, P).
+    """
+    return x @ F.T + u, _sym(F @ P @ F.T + Q)
+
+
+def update(x, P, z, H, R):
+    """Measurement update (Joseph form) of the rows of ``z`` (B, m) without NaN/inf.
+
+    x (B, n), P (B, n, n), H (m, n), R (m, m); returns new (x, P, nis (B,)), nis NaN
+    where there was no measurement (those rows of x and P are the inputs' values).
+    """
+    B, n = x.shape
+    has = np.all(np.isfinite(z), axis=1)  # NaN (or inf) row: no measurement
+    nis = np.full(B, np.nan)
+    if not has.any():
+        return x, P, nis
+    x, P = x.copy(), P.copy()
+    idx = np.flatnonzero(has) if not has.all() else slice(None)
+    xi, Pi = x[idx], P[idx]
+    nu = z[idx] - xi @ H.T  # (b, m)
+    PHt = Pi @ H.T  # (b, n, m)
+    S = _sym(H @ PHt + R)  # (b, m, m)
+    # K = P Hᵀ S⁻¹ = (S⁻¹ H P)ᵀ since S and P are symmetric
+    K = np.swapaxes(np.linalg.solve(S, np.swapaxes(PHt, -1, -2)), -1, -2)  # (b, n, m)
+    nis[idx] = np.einsum("bi,bi->b", nu, np.linalg.solve(S, nu[..., None])[..., 0])
+    xi = xi + np.einsum("bij,bj->bi", K, nu)
+    IKH = np.eye(n) - K @ H
+    Pi = IKH @ Pi @ np.swapaxes(IKH, -1, -2) + K @ R @ np.swapaxes(K, -1, -2)
+    x[idx], P[idx] = xi, _sym(Pi)
+    return x, P, nis
+
+
 class KalmanFilter:
     """B Kalman filters with a shared model, stepped together.
 
@@ -45,8 +81,6 @@ class KalmanFilter:
     x : (B, n) posterior estimates; P : (B, n, n) posterior covariances.
     nis : (B,) last step's normalised innovation squared ``νᵀ S⁻¹ ν``, NaN where there was
         no measurement.
-    mu, x_modes, P_modes : the single-mode view of the IMM attributes ((B, 1), (B, 1, n),
-        (B, 1, n, n)), so the filter can stand in where an IMM is expected.
     """
 
     def __init__(
@@ -78,8 +112,8 @@ class KalmanFilter:
         """Number of trackers."""
         return self.x.shape[0]
 
-    def append(self, x0, P0, mu0=None) -> np.ndarray:
-        """Add trackers at the end; returns their row indices. ``mu0`` is ignored (IMM API)."""
+    def append(self, x0, P0) -> np.ndarray:
+        """Add trackers at the end; returns their row indices."""
         x0 = np.asarray(x0, dtype=float)
         if x0.ndim == 1:
             x0 = x0[None]
@@ -109,68 +143,14 @@ class KalmanFilter:
     # --- filtering ----------------------------------------------------------------------
     def predict(self) -> None:
         """Time update only: ``x ← F x + u``, ``P ← F P Fᵀ + Q``."""
-        self.x = self.x @ self.F.T + self.u
-        self.P = _sym(self.F @ self.P @ self.F.T + self.Q)
+        self.x, self.P = predict(self.x, self.P, self.F, self.Q, self.u)
 
     def update(self, z) -> None:
         """Measurement update for rows of ``z`` (B, m) that are not NaN."""
         z = np.asarray(z, dtype=float).reshape(self.B, self.m)
-        has = np.all(np.isfinite(z), axis=1)  # NaN (or inf) row: no measurement
-        self.nis = np.full(self.B, np.nan)
-        if not has.any():
-            return
-        idx = np.flatnonzero(has) if not has.all() else slice(None)
-        x, P, H, R = self.x[idx], self.P[idx], self.H, self.R
-        nu = z[idx] - x @ H.T  # (b, m)
-        PHt = P @ H.T  # (b, n, m)
-        S = _sym(H @ PHt + R)  # (b, m, m)
-        # K = P Hᵀ S⁻¹ = (S⁻¹ H P)ᵀ since S and P are symmetric
-        K = np.swapaxes(np.linalg.solve(S, np.swapaxes(PHt, -1, -2)), -1, -2)  # (b, n, m)
-        self.nis[idx] = np.einsum("bi,bi->b", nu, np.linalg.solve(S, nu[..., None])[..., 0])
-        x = x + np.einsum("bij,bj->bi", K, nu)
-        IKH = np.eye(self.n) - K @ H
-        P = IKH @ P @ np.swapaxes(IKH, -1, -2) + K @ R @ np.swapaxes(K, -1, -2)
-        self.x[idx], self.P[idx] = x, _sym(P)
+        self.x, self.P, self.nis = update(self.x, self.P, z, self.H, self.R)
 
     def step(self, z) -> None:
         """One cycle: predict, then update with ``z`` (B, m); a NaN (or inf) row predicts only."""
         self.predict()
         self.update(z)
-
-    def predict_ahead(self, steps: int) -> tuple[np.ndarray, np.ndarray]:
-        """Predictions 1..``steps`` steps ahead without changing the filter:
-        (B, steps, n) means and (B, steps, n, n) covariances."""
-        xs = np.empty((self.B, steps, self.n))
-        Ps = np.empty((self.B, steps, self.n, self.n))
-        x, P = self.x, self.P
-        for s in range(steps):
-            x = x @ self.F.T + self.u
-            P = _sym(self.F @ P @ self.F.T + self.Q)
-            xs[:, s], Ps[:, s] = x, P
-        return xs, Ps
-
-    # --- IMM-shaped view ----------------------------------------------------------------
-    @property
-    def mu(self) -> np.ndarray:
-        return np.ones((self.B, 1))
-
-    @property
-    def x_modes(self) -> np.ndarray:
-        return self.x[:, None]
-
-    @property
-    def P_modes(self) -> np.ndarray:
-        return self.P[:, None]
-
-    def predict_modes(self, steps: int) -> tuple[np.ndarray, np.ndarray]:
-        """As :meth:`IMM.predict_modes` with one mode: (B, 1, steps, n), (B, 1, steps, n, n)."""
-        xs, Ps = self.predict_ahead(steps)
-        return xs[:, None], Ps[:, None]
-
-    def predict_modes_at(self, steps, rows=None):
-        """As :meth:`IMM.predict_modes_at` with one mode: (R, 1, S, n), (R, 1, S, n, n)."""
-        from airspace_sim.tracking.prediction import predict_modes_at
-
-        x, P = (self.x, self.P) if rows is None else (self.x[rows], self.P[rows])
-        u = np.broadcast_to(np.asarray(self.u, dtype=float), (self.n,))
-        return predict_modes_at(self.F[None], self.Q[None], u[None], x[:, None], P[:, None], steps)

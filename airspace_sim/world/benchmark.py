@@ -128,34 +128,105 @@ def random_scenario(
     )
 
 
+def bare_imm(
+    preset, sigma: float, n_tracks: int, steps: int, seed: int = 0, kernel: str = "auto"
+) -> dict:
+    """Time the bare IMM step over ``n_tracks`` tracks: the world's ``"imm"`` tracker
+    (:class:`~airspace_sim.world.trackers.ImmTracker`, ``preset`` at the world's dt, R = σ²I)
+    with every slot live and measured, targets at 230 m/s flying straight, started by
+    two-point initialisation. One untimed step (kernel compilation or cache load), then
+    ``steps`` timed ones.
+
+    Returns ``ms_per_step`` (median wall-clock time over the steps), ``cpu_ms_per_step``
+    (median process CPU time, less affected by other processes on the machine),
+    ``ms_mean``, ``n_tracks``, ``kernel``.
+    """
+    from airspace_sim.tracking.initialisation import two_point_initialisation
+    from airspace_sim.world.trackers import ImmTracker
+
+    tracker = ImmTracker(preset, sigma, ImmTracker.Params(kernel=kernel))
+    rng = np.random.default_rng(seed)
+    dt = float(preset.dt)
+    p0 = rng.uniform(-1e5, 1e5, (n_tracks, 2))
+    heading = rng.uniform(-math.pi, math.pi, n_tracks)
+    v = 230.0 * np.stack([np.cos(heading), np.sin(heading)], axis=1)
+    R = sigma**2 * np.eye(2)
+
+    def z_at(k):
+        return p0 + v * (dt * k) + sigma * rng.standard_normal((n_tracks, 2))
+
+    x0, P0 = two_point_initialisation(z_at(0), z_at(1), dt, R, omega_var=np.radians(3.0) ** 2)
+    slots = tracker.birth(x0, P0)
+    Z = np.full((tracker.capacity, 2), np.nan)
+    times, cpu = [], []
+    for k in range(2, steps + 3):
+        Z[slots] = z_at(k)
+        t0, c0 = time.perf_counter(), time.process_time()
+        tracker.step(Z)
+        cpu.append(time.process_time() - c0)
+        times.append(time.perf_counter() - t0)
+    times = np.array(times[1:])
+    return {
+        "ms_per_step": 1000.0 * float(np.median(times)),
+        "cpu_ms_per_step": 1000.0 * float(np.median(cpu[1:])),
+        "ms_mean": 1000.0 * float(times.mean()),
+        "n_tracks": int(n_tracks),
+        "kernel": tracker.imm.kernel,
+    }
+
+
 def bench_world(
-    n_aircraft: int, steps: int = 50, trackers: bool = True, warmup: int = 5, seed: int = 0
+    n_aircraft: int,
+    steps: int = 50,
+    trackers: bool = True,
+    warmup: int = 5,
+    seed: int = 0,
+    compare_imm: bool = True,
 ) -> dict:
     """Time ``steps`` world steps of :func:`random_scenario` with ``n_aircraft`` aircraft.
 
-    Returns a dict: ``n_aircraft``, ``steps``, ``trackers``, ``steps_per_s`` (after
-    ``warmup`` untimed steps, which also compile numba kernels), ``seconds``,
-    ``mean_tracks`` (average number of (ownship, intruder) tracks), ``setup_s``.
+    Returns a dict: ``n_aircraft``, ``steps``, ``trackers``, ``steps_per_s`` and
+    ``seconds`` (after ``warmup`` untimed steps, which also compile numba kernels),
+    ``ms_per_step`` (median wall-clock time over the timed steps), ``cpu_ms_per_step``
+    (median process CPU time), ``mean_tracks`` (average number of (ownship, intruder)
+    tracks), ``setup_s``. With trackers and ``compare_imm``, also ``imm`` (:func:`bare_imm`
+    over ``round(mean_tracks)`` tracks of the world's tracker preset, timed right after, in
+    this process), ``ratio`` (world ms per step over the bare IMM's, wall clock) and
+    ``cpu_ratio`` (the same in CPU time).
     """
     t0 = time.perf_counter()
     from airspace_sim.world import World
 
-    world = World(random_scenario(n_aircraft, trackers=trackers, seed=seed), seed=seed)
+    sc = random_scenario(n_aircraft, trackers=trackers, seed=seed)
+    world = World(sc, seed=seed)
     setup = time.perf_counter() - t0
     for _ in range(warmup):
         world.step()
     tracks = 0
+    per_step, cpu = [], []
     t0 = time.perf_counter()
     for _ in range(steps):
+        t1, c1 = time.perf_counter(), time.process_time()
         world.step()
+        cpu.append(time.process_time() - c1)
+        per_step.append(time.perf_counter() - t1)
         tracks += len(world.tracks)
     elapsed = time.perf_counter() - t0
-    return {
+    out = {
         "n_aircraft": int(n_aircraft),
         "steps": int(steps),
         "trackers": bool(trackers),
         "steps_per_s": steps / elapsed if elapsed > 0 else math.inf,
         "seconds": elapsed,
+        "ms_per_step": 1000.0 * float(np.median(per_step)),
+        "cpu_ms_per_step": 1000.0 * float(np.median(cpu)),
         "mean_tracks": tracks / max(steps, 1),
         "setup_s": setup,
     }
+    if trackers and compare_imm:
+        n_tracks = max(1, round(out["mean_tracks"]))
+        imm = bare_imm(world.tracker_preset, sc.sensor.sigma, n_tracks, steps, seed)
+        out["imm"] = imm
+        out["ratio"] = out["ms_per_step"] / imm["ms_per_step"]
+        out["cpu_ratio"] = out["cpu_ms_per_step"] / imm["cpu_ms_per_step"]
+    return out

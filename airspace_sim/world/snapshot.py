@@ -198,8 +198,8 @@ def live_tracks(world) -> Tracks:
     The only place that reads the world's track table; the env's observations read it
     here too.
     """
-    t = world.tracks
-    return Tracks(t.owner, t.intruder, t.x, t.P, t.mu, t.misses, t.age)
+    v = world.tracks.view()
+    return Tracks(v.owner, v.intruder, v.x, v.P, v.mu, v.misses, v.age)
 
 
 def lookahead_s(world) -> float:

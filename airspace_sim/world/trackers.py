@@ -1,153 +1,338 @@
-"""The world's track table: one batched filter over every (ownship, intruder) pair.
+"""The world's track table: every (ownship, intruder) track of the world in one tracker.
 
-A *track* is a row ``p`` with ``owner[p]`` (the aircraft that tracks), ``intruder[p]``
-(the aircraft tracked), and the filter's estimate ``x[p]`` ``[x, vx, y, vy, Ω]`` (m, m/s,
-rad/s, WORLD frame), ``P[p]`` (5, 5) and ``mu[p]`` (M,). ONE filter object (e.g. one
-batched :class:`~airspace_sim.tracking.IMM`) holds every row of the world: rows are
-appended as intruders are detected and removed after ``drop_after_misses`` missed scans;
-the per-step work is a handful of numpy calls over all rows (no per-pair Python objects).
+A *track* is a slot ``s`` of a :class:`airspace_sim.parts.Tracker` with ``owner[s]`` (the
+aircraft that tracks), ``intruder[s]`` (the aircraft tracked) and the tracker's estimate
+``x[s]`` ``[x, vx, y, vy, Ω]`` (m, m/s, m, m/s, rad/s, WORLD frame), ``P[s]`` (5, 5) and
+``mu[s]`` (M,). ONE tracker object holds every track of the world in stable slots: a birth
+fills free slots, a drop frees slots, no other track moves, so the bookkeeping of a step
+costs O(tracks that change) plus a few vectorised passes over the slots (no per-pair
+Python objects, no sort of all tracks).
 
 Track life cycle (per scan):
 
-1. existing rows are stepped with their measurement (NaN row = not detected: predict only;
-   between scans every row is predicted only); ``misses`` counts consecutive missed scans;
-2. rows with ``misses ≥ drop_after_misses``, or whose owner or intruder left the world,
-   are removed;
+1. every live track is stepped with its measurement (none: predict only; between scans
+   every track is predicted only); ``misses`` counts consecutive missed scans;
+2. tracks with ``misses ≥ drop_after_misses``, or whose owner or intruder left the world,
+   are dropped;
 3. a detection without a track is *pending*; the next detection of the same pair within
-   ``drop_after_misses`` scans starts the track by two-point initialisation: position =
-   last measurement, velocity = difference / Δt, covariance from σ (position σ², velocity
-   2σ²/Δt² plus a manoeuvre allowance, their correlation σ²/Δt).
+   ``drop_after_misses`` scans starts the track by two-point initialisation
+   (:func:`airspace_sim.tracking.initialisation.two_point_initialisation`: position = last
+   measurement, velocity = difference / Δt, covariance from σ with a manoeuvre allowance).
+   A tracker that ``uses_truth`` needs no initialisation: its track starts at the first
+   detection.
 
-Tracker factories (registry kind ``"tracker"``) have the signature
-``factory(preset: Preset, sigma: float) -> filter`` where ``preset`` is the tracker's
-dynamics preset at the world's dt and ``sigma`` the sensor's σ (m). The filter holds zero
-rows at first and provides ``append(x0 (k,5), P0 (k,5,5), mu0 (M,)) -> rows``,
-``remove(mask (B,) bool)``, ``step(z (B,2))`` (NaN row = no measurement) and ``x``, ``P``,
-``mu`` (``mu`` may be absent: one mode). Built in: ``"imm"`` (the matched IMM of the
-preset). The special kind ``"truth"`` runs no filter: tracks hold the intruders' true
-states (perfect surveillance, for benchmarks and baselines).
+API used by the world
+---------------------
+``TrackTable(n_aircraft, tracker, sigma, drop_after_misses, scan_period_s,
+turn_rate_sigma=...)`` with ``tracker`` a constructed :class:`~airspace_sim.parts.Tracker`
+(:func:`make_tracker` builds one from the registry; :meth:`TrackTable.build` does both
+from a tracker kind and its preset);
+``update(time, scanned, det_owner, det_intruder, z, alive, truth_states)`` once per world
+step; ``view()`` → :class:`TrackView`, read-only dense arrays over the live tracks in slot
+order (``slots``, ``owner``, ``intruder``, ``misses``, ``age``, ``x``, ``mu``, and ``P``
+computed when first read), the same object until the next update; ``len(table)``,
+``mode_names``, ``n_modes``, ``predicts_modes``, ``predict_modes_at(steps, slots)``.
+
+Built-in trackers (registry kind ``"tracker"``): ``"imm"`` (:class:`ImmTracker`, the
+preset's matched IMM) and ``"truth"`` (:class:`TruthTracker`, perfect surveillance: the
+intruders' true states, for benchmarks and baselines).
 """
 
 from __future__ import annotations
 
-import numpy as np
+from dataclasses import dataclass
 
+import numpy as np
+from numba import njit
+
+from airspace_sim import parts
 from airspace_sim.dynamics.presets import Preset
+from airspace_sim.errors import UserError
 from airspace_sim.registry import register
+from airspace_sim.tracking.imm import SlotIMM
+from airspace_sim.tracking.initialisation import two_point_initialisation
+from airspace_sim.tracking.keymap import KeyMap
+from airspace_sim.tracking.slots import Slots
 
 #: Velocity variance added at track start for a manoeuvring target, (m/s)².
 MANOEUVRE_VELOCITY_VAR = 10.0**2
 
+#: Smallest initial turn-rate standard deviation of a new track, rad/s.
+MIN_TURN_RATE_SIGMA = float(np.radians(3.0))
+
+
+def _ro(a: np.ndarray) -> np.ndarray:
+    v = a.view()
+    v.flags.writeable = False
+    return v
+
+
+@njit(cache=True)
+def _measurements_by_slot(Z, slot_of_det, z):
+    """Z (capacity, 2) ← NaN, then row ``slot_of_det[d]`` ← z[d] where that is ≥ 0 (one pass;
+    numpy's row scatter is several times slower)."""
+    Z[:] = np.nan
+    for d in range(slot_of_det.size):
+        s = slot_of_det[d]
+        if s >= 0:
+            Z[s, 0] = z[d, 0]
+            Z[s, 1] = z[d, 1]
+
+
+@njit(cache=True)
+def _advance(live, owner, intruder, misses, age, slot_of_det, scanned, drop_after, aircraft):
+    """One step of the per-slot bookkeeping (capacity,) arrays, in place: ``age`` + 1;
+    on a scan ``misses`` + 1, reset to 0 for the slots detected (``slot_of_det`` ≥ 0).
+    Returns the live slots to drop: too many misses, or owner or intruder gone."""
+    cap = live.size
+    for s in range(cap):
+        age[s] += 1
+    if scanned:
+        for s in range(cap):
+            misses[s] += 1
+        for d in range(slot_of_det.size):
+            if slot_of_det[d] >= 0:
+                misses[slot_of_det[d]] = 0
+    out = np.empty(cap, dtype=np.int64)
+    k = 0
+    for s in range(cap):
+        if live[s] and (
+            misses[s] >= drop_after or not aircraft[owner[s]] or not aircraft[intruder[s]]
+        ):
+            out[k] = s
+            k += 1
+    return out[:k]
+
+
+def mode_names(preset: Preset) -> tuple[str, ...]:
+    """Names of the preset's modes: straight, left, right for the 3-mode presets."""
+    if preset.n_modes == 3:
+        return ("straight", "left", "right")
+    return tuple(f"mode{j}" for j in range(preset.n_modes))
+
 
 @register("tracker", "imm")
-def imm_tracker(preset: Preset, sigma: float):
-    """The preset's matched IMM (:meth:`Preset.imm_arguments`) with R = σ² I, zero rows."""
-    from airspace_sim.tracking import IMM
+class ImmTracker(parts.Tracker):
+    """The preset's matched IMM (:meth:`Preset.imm_arguments`) with R = σ² I, in slots
+    (:class:`~airspace_sim.tracking.imm.SlotIMM`); tracks start at the preset's ``mu0``.
 
-    p = preset.with_(measurement_sigma=max(float(sigma), 1e-3))
-    return IMM(**p.imm_arguments(), x0=np.zeros((0, 5)), P0=np.zeros((0, 5, 5)), mu0=p.mu0())
+    Arrays are read-only views of the IMM's buffers, valid until the next step, birth or
+    drop (:class:`SlotIMM`); free slots hold NaN.
+    """
+
+    @dataclass(frozen=True)
+    class Params:
+        kernel: str = parts.param(
+            "auto",
+            doc="IMM step kernel (same bits either way, see tracking.IMM)",
+            choices=("auto", "generated", "loops"),
+        )
+
+    predicts_modes = True
+
+    def __init__(self, preset: Preset, sigma: float, params=None):
+        p = preset.with_(measurement_sigma=max(float(sigma), 1e-3))
+        self.params = self.Params() if params is None else params
+        self.imm = SlotIMM(**p.imm_arguments(), kernel=self.params.kernel)
+        self._mu0 = p.mu0()
+        self.n_modes = preset.n_modes
+        self.mode_names = mode_names(preset)
+
+    capacity = property(lambda self: self.imm.capacity, doc="Number of lanes allocated.")
+    alive = property(lambda self: self.imm.alive, doc="(capacity,) bool: live slots.")
+    x = property(lambda self: self.imm.x, doc="(capacity, 5) posterior states by slot.")
+    P = property(lambda self: self.imm.P, doc="(capacity, 5, 5) posterior covariances.")
+    mu = property(lambda self: self.imm.mu, doc="(capacity, M) mode probabilities by slot.")
+
+    def birth(self, x0, P0) -> np.ndarray:
+        return self.imm.birth(x0, P0, self._mu0)
+
+    def drop(self, slots) -> None:
+        self.imm.drop(slots)
+
+    def step(self, z, truth=None) -> None:
+        self.imm.step(z)
+
+    def predict_modes_at(self, steps, slots):
+        return self.imm.predict_modes_at(steps, slots)
 
 
-def _sort_lookup(keys: np.ndarray, query: np.ndarray):
-    """For each query key, the index in ``keys`` holding it, or −1 (keys unique)."""
-    if keys.size == 0 or query.size == 0:
-        return np.full(query.size, -1, dtype=np.int64)
-    order = np.argsort(keys, kind="stable")
-    sk = keys[order]
-    pos = np.minimum(np.searchsorted(sk, query), sk.size - 1)
-    return np.where(sk[pos] == query, order[pos], -1)
+@register("tracker", "truth")
+class TruthTracker(parts.Tracker):
+    """Perfect surveillance: each track holds its intruder's true state, ``P`` = 0 and
+    ``mu`` = NaN (no mode estimate; ``n_modes`` is the preset's)."""
+
+    uses_truth = True
+
+    def __init__(self, preset: Preset, sigma: float, params=None):
+        self.params = parts.NoParams() if params is None else params
+        self.n_modes = preset.n_modes
+        self.mode_names = mode_names(preset)
+        self._slots = Slots()
+        self._x = np.zeros((0, 5))
+        self._P = np.zeros((0, 5, 5))
+        self._mu = np.zeros((0, self.n_modes))
+
+    capacity = property(lambda self: self._slots.capacity, doc="Number of lanes allocated.")
+    alive = property(lambda self: _ro(self._slots.alive), doc="(capacity,) bool: live slots.")
+    x = property(lambda self: _ro(self._x), doc="(capacity, 5) true states by slot.")
+    P = property(lambda self: _ro(self._P), doc="(capacity, 5, 5) zeros.")
+    mu = property(lambda self: _ro(self._mu), doc="(capacity, M) NaN.")
+
+    def birth(self, x0, P0) -> np.ndarray:
+        x0 = np.asarray(x0, dtype=float).reshape(-1, 5)
+        k = x0.shape[0]
+        need = self._slots.capacity_for(k)
+        if need > self.capacity:
+            old = self.capacity
+            x = np.full((need, 5), np.nan)
+            x[:old] = self._x
+            self._x = x
+            self._P = np.zeros((need, 5, 5))
+            self._mu = np.full((need, self.n_modes), np.nan)
+            self._slots.grow(need)
+        slots = self._slots.take(k)
+        self._x[slots] = x0
+        return slots
+
+    def drop(self, slots) -> None:
+        s = self._slots.release(slots, "truth tracker drop")
+        self._x[s] = np.nan
+
+    def step(self, z, truth=None) -> None:
+        if truth is None:
+            raise UserError("truth tracker: step needs the intruders' true states")
+        live = self._slots.alive
+        self._x[live] = np.asarray(truth, dtype=float)[live]
+
+
+def make_tracker(kind: str, preset: Preset, sigma: float, params=None) -> parts.Tracker:
+    """The registered tracker ``kind`` for ``preset`` (at the world's dt) and sensor σ (m).
+
+    ``params``: an instance of the class's ``Params``, a dict of its fields, or None (the
+    defaults).
+    """
+    from airspace_sim import registry
+
+    return registry.build("tracker", kind, preset, sigma, params=params)
+
+
+class TrackView:
+    """Read-only dense arrays over the live tracks of a :class:`TrackTable`, in slot order
+    (``P`` live tracks): ``slots``, ``owner``, ``intruder``, ``misses``, ``age`` (steps
+    since the track started) (P,) int; ``x`` (P, 5); ``mu`` (P, M); ``P`` (P, 5, 5),
+    gathered when first read. Valid until the table's next update."""
+
+    __slots__ = ("slots", "owner", "intruder", "misses", "age", "x", "mu", "_tracker", "_P")
+
+    def __init__(self, table: TrackTable):
+        t = table.tracker
+        s = np.flatnonzero(t.alive)
+        self.slots = _ro(s)
+        # (np.take: a row gather several times faster than fancy indexing)
+        self.owner = _ro(np.take(table._owner, s))
+        self.intruder = _ro(np.take(table._intruder, s))
+        self.misses = _ro(np.take(table._misses, s))
+        self.age = _ro(np.take(table._age, s))
+        self.x = _ro(np.take(t.x, s, axis=0))
+        self.mu = _ro(np.take(t.mu, s, axis=0))
+        self._tracker = t
+        self._P = None
+
+    @property
+    def P(self) -> np.ndarray:
+        if self._P is None:
+            self._P = _ro(np.take(self._tracker.P, self.slots, axis=0))
+        return self._P
+
+    def __len__(self) -> int:
+        return int(self.slots.size)
 
 
 class TrackTable:
     """All tracks of a world (see the module docstring).
 
-    Attributes: ``owner`` (P,) int, ``intruder`` (P,) int, ``misses`` (P,) int, ``age``
-    (P,) int (steps since the track started), ``x`` (P, 5), ``P`` (P, 5, 5), ``mu`` (P, M),
-    ``mode_names`` (M,) str.
+    n_aircraft : N; tracker : a constructed :class:`~airspace_sim.parts.Tracker` with no
+    live slot; sigma : sensor position σ, m; drop_after_misses : scans; scan_period_s : s
+    between scans; turn_rate_sigma : initial Ω standard deviation of a new track, rad/s
+    (:meth:`build` takes the preset's fastest turn, at least 3°/s).
     """
 
     def __init__(
         self,
+        n_aircraft: int,
+        tracker: parts.Tracker,
+        sigma: float,
+        drop_after_misses: int,
+        scan_period_s: float,
+        turn_rate_sigma: float = MIN_TURN_RATE_SIGMA,
+    ):
+        if not isinstance(tracker, parts.Tracker):
+            raise UserError(f"TrackTable: tracker must be a parts.Tracker, got {tracker!r}")
+        self.n = int(n_aircraft)
+        self.tracker = tracker
+        self.sigma = float(sigma)
+        self.drop_after = max(1, int(drop_after_misses))
+        self.scan_period_s = float(scan_period_s)
+        self._omega_var = float(turn_rate_sigma) ** 2
+        # per-slot bookkeeping, sized like the tracker (free slots: owner = intruder = 0)
+        self._owner = np.zeros(0, dtype=np.int64)
+        self._intruder = np.zeros(0, dtype=np.int64)
+        self._misses = np.zeros(0, dtype=np.int64)
+        self._age = np.zeros(0, dtype=np.int64)
+        # live tracks' slots by key owner·N + intruder
+        self._index = KeyMap()
+        # pending detections (sorted by key): last measurement and its time
+        self._pend_key = np.zeros(0, dtype=np.int64)
+        self._pend_z = np.zeros((0, 2))
+        self._pend_t = np.zeros(0)
+        self._z = np.zeros((0, 2))
+        self._view = None
+
+    @classmethod
+    def build(
+        cls,
         n_aircraft: int,
         kind: str,
         preset: Preset,
         sigma: float,
         drop_after_misses: int,
         scan_period_s: float,
-    ):
-        from airspace_sim import registry
-
-        self.n = int(n_aircraft)
-        self.kind = kind
-        self.sigma = float(sigma)
-        self.drop_after = max(1, int(drop_after_misses))
-        self.scan_period_s = float(scan_period_s)
-        self.preset = preset
-        self.n_modes = preset.n_modes if kind in ("imm", "truth") else None
-        self.filter = None if kind == "truth" else registry.get("tracker", kind)(preset, sigma)
-        self.owner = np.zeros(0, dtype=np.int64)
-        self.intruder = np.zeros(0, dtype=np.int64)
-        self.misses = np.zeros(0, dtype=np.int64)
-        self.age = np.zeros(0, dtype=np.int64)
-        self._truth_x = np.zeros((0, 5))
-        self._pend_key = np.zeros(0, dtype=np.int64)
-        self._pend_z = np.zeros((0, 2))
-        self._pend_t = np.zeros(0)
+        params=None,
+    ) -> TrackTable:
+        """The table of the registered tracker ``kind`` (:func:`make_tracker`), with the
+        initial Ω σ from ``preset``'s fastest turn (at least 3°/s)."""
         rates = np.abs(np.asarray(preset.turn_rates, dtype=float))
-        self._omega_var = float(max(rates.max(initial=0.0), np.radians(3.0))) ** 2
-        self.mode_names = (
-            ["straight", "left", "right"]
-            if preset.n_modes == 3
-            else [f"mode{j}" for j in range(preset.n_modes)]
-        )
+        omega = max(float(rates.max(initial=0.0)), MIN_TURN_RATE_SIGMA)
+        tracker = make_tracker(kind, preset, sigma, params)
+        return cls(n_aircraft, tracker, sigma, drop_after_misses, scan_period_s, omega)
 
     # ------------------------------------------------------------------ views
-    def view(self):
-        """Dense arrays over the live tracks (slots = rows here)."""
-        from types import SimpleNamespace
+    def __len__(self) -> int:
+        return len(self._index)
 
-        return SimpleNamespace(
-            slots=np.arange(len(self)),
-            owner=self.owner,
-            intruder=self.intruder,
-            misses=self.misses,
-            age=self.age,
-            x=self.x,
-            P=self.P,
-            mu=self.mu,
-        )
+    @property
+    def n_modes(self) -> int:
+        return int(self.tracker.n_modes)
+
+    @property
+    def mode_names(self) -> tuple[str, ...]:
+        return tuple(self.tracker.mode_names)
 
     @property
     def predicts_modes(self) -> bool:
-        return self.filter is not None and hasattr(self.filter, "predict_modes_at")
+        return bool(self.tracker.predicts_modes)
 
     def predict_modes_at(self, steps, slots):
-        return self.filter.predict_modes_at(steps, slots)
+        """The tracker's mode-conditioned predictions for ``slots`` (R,) at ``steps`` (S,):
+        ``(xs (R, M, S, 5), Ps (R, M, S, 5, 5))`` (:meth:`parts.Tracker.predict_modes_at`)."""
+        return self.tracker.predict_modes_at(steps, slots)
 
-    def __len__(self) -> int:
-        return int(self.owner.size)
-
-    @property
-    def keys(self) -> np.ndarray:
-        return self.owner * self.n + self.intruder
-
-    @property
-    def x(self) -> np.ndarray:
-        return self._truth_x if self.filter is None else np.asarray(self.filter.x)
-
-    @property
-    def P(self) -> np.ndarray:
-        if self.filter is None:
-            return np.zeros((len(self), 5, 5))
-        return np.asarray(self.filter.P)
-
-    @property
-    def mu(self) -> np.ndarray:
-        if self.filter is not None and hasattr(self.filter, "mu"):
-            return np.asarray(self.filter.mu)
-        if self.filter is None and self.n_modes:
-            return np.full((len(self), self.n_modes), np.nan)
-        return np.ones((len(self), 1))
+    def view(self) -> TrackView:
+        """The live tracks as dense read-only arrays (:class:`TrackView`), slot order."""
+        if self._view is None:
+            self._view = TrackView(self)
+        return self._view
 
     # ----------------------------------------------------------------- update
     def update(
@@ -157,96 +342,97 @@ class TrackTable:
 
         time : s, now. scanned : a scan happened now. det_owner, det_intruder (D,) int and
         z (D, 2) m: this scan's detections. alive : (N,) bool aircraft still in the world.
-        truth_states : (N, 5) true ``[x, vx, y, vy, Ω]`` (used by kind ``"truth"`` only).
+        truth_states : (N, 5) true ``[x, vx, y, vy, Ω]`` (needed by trackers that
+        ``uses_truth``).
         """
-        n = self.n
-        det_key = np.asarray(det_owner, np.int64) * n + np.asarray(det_intruder, np.int64)
-        row_of_det = _sort_lookup(self.keys, det_key)
-        P = len(self)
-        # 1. step existing rows
-        hit = np.zeros(P, dtype=bool)
-        matched = row_of_det >= 0
-        hit[row_of_det[matched]] = True
-        if self.filter is not None and P:
-            Z = np.full((P, 2), np.nan)
-            Z[row_of_det[matched]] = z[matched]
-            self.filter.step(Z)
-        self.age += 1
-        if scanned:
-            self.misses = np.where(hit, 0, self.misses + 1)
-        # 2. drop
-        drop = (self.misses >= self.drop_after) | ~alive[self.owner] | ~alive[self.intruder]
-        if drop.any():
-            self._remove(drop)
+        self._view = None
+        t = self.tracker
+        if t.uses_truth and truth_states is None:
+            raise UserError("TrackTable.update: this tracker needs truth_states")
+        z = np.asarray(z, dtype=float).reshape(-1, 2)
+        det_key = np.asarray(det_owner, np.int64) * self.n + np.asarray(det_intruder, np.int64)
+        slot_of_det = self._index.get(det_key)  # −1: no track
+        # 1. step every live track (NaN row: no measurement)
+        if len(self):
+            cap = t.capacity
+            if self._z.shape[0] != cap:
+                self._z = np.empty((cap, 2))
+            _measurements_by_slot(self._z, slot_of_det, z)
+            truth = np.asarray(truth_states)[self._intruder] if t.uses_truth else None
+            t.step(self._z, truth)
+            # 2. age, misses, drop
+            drop = _advance(
+                np.asarray(t.alive), self._owner, self._intruder, self._misses, self._age,
+                slot_of_det, bool(scanned), self.drop_after, np.asarray(alive, dtype=np.bool_),
+            )  # fmt: skip
+            if drop.size:
+                self._drop(drop)
         # 3. births
-        new = ~matched
+        new = slot_of_det < 0
         if new.any():
-            self._births(time, det_key[new], np.asarray(z)[new], truth_states)
-        if self.filter is None and len(self):
-            self._truth_x = np.asarray(truth_states)[self.intruder].copy()
+            self._births(time, det_key[new], z[new], truth_states)
 
-    def _remove(self, mask) -> None:
-        keep = ~mask
-        if self.filter is not None:
-            self.filter.remove(mask)
-        else:
-            self._truth_x = self._truth_x[keep]
-        self.owner, self.intruder = self.owner[keep], self.intruder[keep]
-        self.misses, self.age = self.misses[keep], self.age[keep]
+    def _drop(self, slots: np.ndarray) -> None:
+        self.tracker.drop(slots)
+        self._index.delete(self._owner[slots] * self.n + self._intruder[slots])
+        self._owner[slots] = 0
+        self._intruder[slots] = 0
 
-    def _append(self, keys, x0, P0) -> None:
-        if self.filter is not None:
-            mu0 = self.preset.mu0()
-            self.filter.append(x0, P0, mu0)
-        else:
-            self._truth_x = np.concatenate([self._truth_x, x0])
-        k = keys.size
-        self.owner = np.concatenate([self.owner, keys // self.n])
-        self.intruder = np.concatenate([self.intruder, keys % self.n])
-        self.misses = np.concatenate([self.misses, np.zeros(k, np.int64)])
-        self.age = np.concatenate([self.age, np.zeros(k, np.int64)])
+    def _start(self, keys: np.ndarray, x0, P0) -> None:
+        """Start tracks for the (sorted, new) ``keys`` (k,) from x0 (k, 5), P0 (k, 5, 5)."""
+        slots = np.asarray(self.tracker.birth(x0, P0), dtype=np.int64)
+        cap = self.tracker.capacity
+        if self._owner.size < cap:
+            for name in ("_owner", "_intruder", "_misses", "_age"):
+                a = getattr(self, name)
+                b = np.zeros(cap, dtype=np.int64)
+                b[: a.size] = a
+                setattr(self, name, b)
+        self._owner[slots] = keys // self.n
+        self._intruder[slots] = keys % self.n
+        self._misses[slots] = 0
+        self._age[slots] = 0
+        self._index.put(keys, slots)
 
     def _births(self, time, keys, z, truth_states) -> None:
         order = np.argsort(keys, kind="stable")
         keys, z = keys[order], z[order]
-        if self.filter is None:  # perfect surveillance: start at once from truth
-            self._append(keys, np.asarray(truth_states)[keys % self.n], None)
+        if self.tracker.uses_truth:  # no initialisation needed: start at once
+            x0 = np.asarray(truth_states, dtype=float)[keys % self.n]
+            self._start(keys, x0, np.zeros((keys.size, 5, 5)))
             return
         # expire stale pending detections
         max_age = self.drop_after * self.scan_period_s + 1e-9
         fresh = (time - self._pend_t) <= max_age
-        self._pend_key, self._pend_z, self._pend_t = (
-            self._pend_key[fresh],
-            self._pend_z[fresh],
-            self._pend_t[fresh],
-        )
-        prev = _sort_lookup(self._pend_key, keys)
+        if not fresh.all():
+            self._pend_key, self._pend_z, self._pend_t = (
+                self._pend_key[fresh],
+                self._pend_z[fresh],
+                self._pend_t[fresh],
+            )
+        prev = _sorted_lookup(self._pend_key, keys)
         two = prev >= 0
         if two.any():
             two[two] = time - self._pend_t[prev[two]] > 0
         if two.any():
             p = prev[two]
-            dt = (time - self._pend_t[p])[:, None]
-            z1, z2 = self._pend_z[p], z[two]
-            v = (z2 - z1) / dt
-            k = z2.shape[0]
-            x0 = np.zeros((k, 5))
-            x0[:, 0], x0[:, 1], x0[:, 2], x0[:, 3] = z2[:, 0], v[:, 0], z2[:, 1], v[:, 1]
             s2 = max(self.sigma, 1.0) ** 2
-            d = dt[:, 0]
-            P0 = np.zeros((k, 5, 5))
-            for a, b in ((0, 1), (2, 3)):
-                P0[:, a, a] = s2
-                P0[:, a, b] = P0[:, b, a] = s2 / d
-                P0[:, b, b] = 2.0 * s2 / d**2 + MANOEUVRE_VELOCITY_VAR
-            P0[:, 4, 4] = self._omega_var
-            self._append(keys[two], x0, P0)
-            gone = np.zeros(self._pend_key.size, dtype=bool)
-            gone[p] = True
+            x0, P0 = two_point_initialisation(
+                self._pend_z[p],
+                z[two],
+                time - self._pend_t[p],
+                s2 * np.eye(2),
+                omega=0.0,
+                omega_var=self._omega_var,
+                extra_velocity_var=MANOEUVRE_VELOCITY_VAR,
+            )
+            self._start(keys[two], x0, P0)
+            gone = np.ones(self._pend_key.size, dtype=bool)
+            gone[p] = False
             self._pend_key, self._pend_z, self._pend_t = (
-                self._pend_key[~gone],
-                self._pend_z[~gone],
-                self._pend_t[~gone],
+                self._pend_key[gone],
+                self._pend_z[gone],
+                self._pend_t[gone],
             )
         # the others become (or refresh) pending detections
         rest = ~two
@@ -258,12 +444,15 @@ class TrackTable:
             add = ~refresh
             if add.any():
                 nk = keys[rest][add]
-                self._pend_key = np.concatenate([self._pend_key, nk])
-                self._pend_z = np.concatenate([self._pend_z, z[rest][add]])
-                self._pend_t = np.concatenate([self._pend_t, np.full(nk.size, time)])
-                o = np.argsort(self._pend_key, kind="stable")
-                self._pend_key, self._pend_z, self._pend_t = (
-                    self._pend_key[o],
-                    self._pend_z[o],
-                    self._pend_t[o],
-                )
+                pos = np.searchsorted(self._pend_key, nk)
+                self._pend_key = np.insert(self._pend_key, pos, nk)
+                self._pend_z = np.insert(self._pend_z, pos, z[rest][add], axis=0)
+                self._pend_t = np.insert(self._pend_t, pos, time)
+
+
+def _sorted_lookup(sorted_keys: np.ndarray, query: np.ndarray) -> np.ndarray:
+    """For each query key, its index in ``sorted_keys`` (sorted, unique), or −1."""
+    if sorted_keys.size == 0 or query.size == 0:
+        return np.full(query.size, -1, dtype=np.int64)
+    pos = np.minimum(np.searchsorted(sorted_keys, query), sorted_keys.size - 1)
+    return np.where(sorted_keys[pos] == query, pos, -1)

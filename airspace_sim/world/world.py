@@ -124,13 +124,14 @@ class World:
             "sensor", sc.sensor.kind, sc.sensor, dt, params=sc.sensor.params
         )
         self.tracker_preset = presets.get(sc.tracker.model, dt=dt)
-        self.tracks = TrackTable(
+        self.tracks = TrackTable.build(
             n,
             sc.tracker.kind,
             self.tracker_preset,
             sc.sensor.sigma,
             sc.sensor.drop_after_misses,
             self.sensor.period_steps * dt,
+            params=sc.tracker.params,
         )
         self.trackers_on = self.controlled | self.avoid  # ownships that track intruders
         self.policy = AvoidancePolicy(sc, dt, self.avoid & ~self.controlled, self.trackers_on)

@@ -1,0 +1,221 @@
+"""The world's track table over a slot tracker: life cycle, pending detections, slot reuse,
+the truth tracker, and the built-in trackers against the Tracker protocol.
+
+Oracles: an independent one-tracker :class:`IMM` per track, started from
+:func:`two_point_initialisation` of the same two measurements and fed the same
+measurements (NaN when missed): the table's track must equal it bit for bit.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from airspace_sim import parts, registry
+from airspace_sim.dynamics import presets
+from airspace_sim.errors import UserError
+from airspace_sim.tracking import IMM
+from airspace_sim.tracking.initialisation import two_point_initialisation
+from airspace_sim.world.trackers import (
+    MANOEUVRE_VELOCITY_VAR,
+    ImmTracker,
+    TrackTable,
+    TruthTracker,
+    make_tracker,
+)
+
+SIGMA, N = 50.0, 4
+PRESET = presets.get("realistic", dt=1.0)
+OMEGA = np.radians(3.0)
+
+
+def table(drop_after=2):
+    return TrackTable.build(N, "imm", PRESET, SIGMA, drop_after, 1.0)
+
+
+def reference(z0, z1, dt):
+    x0, P0 = two_point_initialisation(
+        z0[None], z1[None], dt, SIGMA**2 * np.eye(2), 0.0, OMEGA**2, MANOEUVRE_VELOCITY_VAR
+    )
+    p = PRESET.with_(measurement_sigma=SIGMA)
+    return IMM(**p.imm_arguments(), x0=x0, P0=P0, mu0=p.mu0())
+
+
+def track(t: TrackTable, owner, intruder):
+    v = t.view()
+    i = np.flatnonzero((v.owner == owner) & (v.intruder == intruder))
+    return None if i.size == 0 else int(i[0])
+
+
+def test_life_cycle_pending_two_point_misses_reuse_and_dead_aircraft():
+    t = table(drop_after=2)
+    alive = np.ones(N, dtype=bool)
+    rng = np.random.default_rng(0)
+
+    def z():
+        return rng.uniform(-1e4, 1e4, 2)
+
+    def upd(time, dets, scanned=True, alive=alive):
+        o = np.array([d[0] for d in dets], dtype=np.int64)
+        i = np.array([d[1] for d in dets], dtype=np.int64)
+        zz = np.array([d[2] for d in dets]).reshape(-1, 2)
+        t.update(time, scanned, o, i, zz, alive)
+
+    a0, b0 = z(), z()
+    upd(0.0, [(0, 1, a0), (0, 2, b0), (1, 3, z())])
+    assert len(t) == 0 and len(t.view()) == 0  # one detection is not a track yet
+    a1 = z()
+    upd(1.0, [(0, 1, a1)])
+    assert len(t) == 1
+    ref01 = reference(a0, a1, 1.0)
+    r = track(t, 0, 1)
+    np.testing.assert_array_equal(t.view().x[r], ref01.x[0])
+    np.testing.assert_array_equal(t.view().P[r], ref01.P[0])
+    slot01 = int(t.view().slots[r])
+    # (0, 2): pending since t = 0, detected again 2 s later (within 2 scans): Δt = 2 s
+    b2 = z()
+    upd(2.0, [(0, 2, b2)])
+    ref01.step(np.full((1, 2), np.nan))
+    ref02 = reference(b0, b2, 2.0)
+    v = t.view()
+    assert v.age[track(t, 0, 1)] == 1 and v.misses[track(t, 0, 1)] == 1
+    np.testing.assert_array_equal(v.x[track(t, 0, 1)], ref01.x[0])
+    np.testing.assert_array_equal(v.x[track(t, 0, 2)], ref02.x[0])
+    slot02 = int(v.slots[track(t, 0, 2)])
+    # a step between scans: predicted only, misses unchanged
+    upd(2.5, [], scanned=False)
+    ref01.step(np.full((1, 2), np.nan))
+    ref02.step(np.full((1, 2), np.nan))
+    assert t.view().misses[track(t, 0, 1)] == 1
+    np.testing.assert_array_equal(t.view().x[track(t, 0, 2)], ref02.x[0])
+    # second missed scan: (0, 1) is dropped; (3, 0) detected for the first time
+    b3, c3 = z(), z()
+    upd(3.0, [(0, 2, b3), (3, 0, c3)])
+    assert track(t, 0, 1) is None and len(t) == 1
+    ref02.step(b3[None])
+    np.testing.assert_array_equal(t.view().x[track(t, 0, 2)], ref02.x[0])
+    # (3, 0) starts in the freed slot; (0, 2) never moved
+    c4 = z()
+    upd(4.0, [(3, 0, c4), (0, 2, z())])
+    v = t.view()
+    assert int(v.slots[track(t, 3, 0)]) == slot01 and int(v.slots[track(t, 0, 2)]) == slot02
+    np.testing.assert_array_equal(v.x[track(t, 3, 0)], reference(c3, c4, 1.0).x[0])
+    # (1, 3): pending since t = 0, seen again at t = 5 (too late: 5 s > 2 scans) -> pending
+    # again; at t = 6 the track starts from the t = 5 and t = 6 measurements
+    d5, d6 = z(), z()
+    upd(5.0, [(1, 3, d5), (3, 0, z()), (0, 2, z())])
+    assert track(t, 1, 3) is None
+    upd(6.0, [(1, 3, d6), (3, 0, z()), (0, 2, z())])
+    np.testing.assert_array_equal(t.view().x[track(t, 1, 3)], reference(d5, d6, 1.0).x[0])
+    # aircraft 2 leaves: its track is dropped at once, the others stay
+    gone = alive.copy()
+    gone[2] = False
+    upd(7.0, [(1, 3, z()), (3, 0, z())], alive=gone)
+    v = t.view()
+    assert sorted(zip(v.owner.tolist(), v.intruder.tolist(), strict=True)) == [(1, 3), (3, 0)]
+    assert len(t) == len(v) == 2
+
+
+def test_view_is_read_only_lazy_and_fixed_until_the_next_update():
+    t = table()
+    alive = np.ones(N, dtype=bool)
+    o, i = np.array([0, 1, 2]), np.array([1, 2, 3])
+    for time in (0.0, 1.0):
+        t.update(time, True, o, i, np.full((3, 2), 100.0 * time), alive)
+    v = t.view()
+    assert t.view() is v and len(v) == 3
+    for a in (v.slots, v.owner, v.intruder, v.misses, v.age, v.x, v.mu, v.P):
+        assert not a.flags.writeable
+    np.testing.assert_array_equal(v.P, np.asarray(t.tracker.P)[v.slots])
+    assert v.mu.shape == (3, PRESET.n_modes) and np.allclose(v.mu.sum(axis=1), 1.0)
+    t.update(2.0, True, o, i, np.full((3, 2), 200.0), alive)
+    assert t.view() is not v
+    assert t.n_modes == 3 and t.mode_names == ("straight", "left", "right")
+    assert t.predicts_modes
+    xs, Ps = t.predict_modes_at(np.array([1, 5]), t.view().slots[:2])
+    assert xs.shape == (2, 3, 2, 5) and Ps.shape == (2, 3, 2, 5, 5)
+
+
+def test_truth_tracker_starts_at_first_detection_and_holds_the_truth():
+    t = TrackTable.build(N, "truth", PRESET, SIGMA, 2, 1.0)
+    assert isinstance(t.tracker, TruthTracker) and t.tracker.uses_truth
+    assert not t.predicts_modes and t.n_modes == PRESET.n_modes
+    alive = np.ones(N, dtype=bool)
+    rng = np.random.default_rng(1)
+    o, i = np.array([0, 0, 3]), np.array([1, 2, 1])
+    for step in range(4):
+        truth = rng.normal(size=(N, 5))
+        dets = slice(None) if step < 2 else slice(0, 1)  # (0, 2) and (3, 1) then missed
+        t.update(float(step), True, o[dets], i[dets], np.zeros((3, 2))[dets], alive, truth)
+        v = t.view()
+        assert len(v) == (3 if step < 3 else 1)  # dropped after 2 missed scans
+        np.testing.assert_array_equal(v.x, truth[v.intruder])
+        assert np.all(v.P == 0) and np.isnan(v.mu).all() and v.mu.shape == (len(v), 3)
+    with pytest.raises(UserError, match="needs truth_states"):
+        t.update(5.0, True, o, i, np.zeros((3, 2)), alive)
+
+
+@pytest.mark.parametrize("name", ["imm", "truth"])
+def test_builtin_trackers_fit_the_protocol(name):
+    cls = registry.get("tracker", name)
+    assert issubclass(cls, parts.Tracker)
+    parts.check("tracker", cls, name)
+    tr = make_tracker(name, PRESET, SIGMA)
+    assert tr.capacity == 0 and not tr.alive.any()
+    slots = tr.birth(np.zeros((3, 5)), np.broadcast_to(np.eye(5), (3, 5, 5)))
+    assert slots.tolist() == [0, 1, 2] and tr.alive[slots].all()
+    tr.drop(slots[1:2])
+    assert tr.alive.tolist()[:3] == [True, False, True]
+    assert tr.x.shape == (tr.capacity, 5) and tr.P.shape == (tr.capacity, 5, 5)
+    assert tr.mu.shape == (tr.capacity, tr.n_modes) == (tr.capacity, 3)
+
+
+def test_make_tracker_params():
+    tr = make_tracker("imm", PRESET, SIGMA, {"kernel": "loops"})
+    assert isinstance(tr, ImmTracker) and tr.imm.kernel == "loops"
+    # unknown or mistyped params are refused where every scenario key is, in the loader
+    from airspace_sim.scenarios import load
+
+    with pytest.raises(UserError, match="tracker.params.bogus"):
+        load("head_on", ["tracker.params.bogus=1"])
+    with pytest.raises(UserError, match="tracker.params.kernel"):
+        load("head_on", ['tracker.params.kernel="fast"'])
+    assert load("head_on", ['tracker.params.kernel="loops"']).tracker.params == {"kernel": "loops"}
+    with pytest.raises(UserError, match="must be a parts.Tracker"):
+        TrackTable(N, object(), SIGMA, 2, 1.0)
+
+
+@pytest.mark.parametrize("kind", ["imm", "truth"])
+def test_table_pickles_and_continues_bit_for_bit(kind):
+    import copy
+    import pickle
+
+    rng = np.random.default_rng(3)
+    t = TrackTable.build(N, kind, PRESET, SIGMA, 2, 1.0)
+    alive = np.ones(N, dtype=bool)
+    o, i = np.array([0, 0, 1, 2, 3]), np.array([1, 2, 3, 0, 1])
+    pos = rng.uniform(-1e4, 1e4, (N, 2))
+    vel = rng.uniform(-200, 200, (N, 2))
+
+    def scan(tab, k):
+        truth = np.zeros((N, 5))
+        truth[:, [0, 2]] = pos + k * vel
+        truth[:, [1, 3]] = vel
+        det = (np.arange(5) + k) % 5 > 1  # two missed scans in five: drops and births
+        z = truth[i][:, [0, 2]] + SIGMA * np.sin(np.arange(10) + k).reshape(5, 2)
+        tab.update(float(k), True, o[det], i[det], z[det], alive, truth)
+
+    seen = []
+    for k in range(6):
+        scan(t, k)
+        v = t.view()
+        seen.append(frozenset(zip(v.owner.tolist(), v.intruder.tolist(), strict=True)))
+    assert len(set(seen[2:])) > 1  # tracks come and go
+    copies = [pickle.loads(pickle.dumps(t)), copy.deepcopy(t)]
+    for k in range(6, 14):
+        for tab in [t, *copies]:
+            scan(tab, k)
+    for c in copies:
+        a, b = t.view(), c.view()
+        for name in ("slots", "owner", "intruder", "misses", "age", "x", "mu", "P"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
