@@ -12,8 +12,8 @@ resolver ``bands`` (look-ahead 120 s). ``trackers=True`` tracks every intruder i
 with the IMM from noisy measurements; ``trackers=False`` uses tracker ``"truth"`` (perfect
 surveillance, no filter), everything else identical.
 
-:func:`ring_scenario` builds the converging ring (BlueSky's ``SYN SUPER``) directly from the
-schema dataclasses.
+:func:`ring_scenario` builds the converging ring (BlueSky's ``SYN SUPER``). Both are the
+scenario generator's patterns (:mod:`airspace_sim.scenarios.traffic`) through the loader.
 """
 
 from __future__ import annotations
@@ -23,14 +23,7 @@ import time
 
 import numpy as np
 
-from airspace_sim.scenarios.schema import (
-    AircraftSpec,
-    ResolverSpec,
-    Scenario,
-    SensorSpec,
-    Separation,
-    TrackerSpec,
-)
+from airspace_sim.scenarios import Scenario, from_dict
 
 
 def ring_scenario(
@@ -48,7 +41,8 @@ def ring_scenario(
     duration: float | None = None,
     seed: int = 0,
 ) -> Scenario:
-    """``n`` aircraft evenly on a circle, all heading for the diametrically opposite point.
+    """``n`` aircraft evenly on a circle, all heading for the diametrically opposite point
+    (the scenario generator's ``traffic.pattern = "ring"``, validated by the loader).
 
     ``radius`` defaults to the smallest ring on which neighbours start 10% more than
     2·r_safe apart (``1.1·r_safe / sin(π/n)``), but at least 20 km. ``duration`` defaults
@@ -56,75 +50,43 @@ def ring_scenario(
     """
     if radius is None:
         radius = max(1.1 * r_safe / math.sin(math.pi / n), 20000.0)
-    aircraft = []
-    for i in range(n):
-        a = 2.0 * math.pi * i / n
-        p = (radius * math.cos(a), radius * math.sin(a))
-        aircraft.append(
-            AircraftSpec(
-                id=f"R{i:03d}",
-                position=p,
-                heading_deg=math.degrees(a + math.pi) % 360.0,
-                speed=speed,
-                autopilot="route",
-                waypoints=[(-p[0], -p[1])],
-            )
-        )
     if duration is None:
         duration = math.ceil(2.0 * radius / speed + 300.0)
-    return Scenario(
-        name=f"ring{n}",
-        description=f"{n} aircraft on a {radius / 1000:.1f} km ring",
-        seed=seed,
-        dt=dt,
-        duration=duration,
-        separation=Separation(r_safe=r_safe),
-        sensor=SensorSpec(range=sensor_range, sigma=sigma),
-        tracker=TrackerSpec(kind=tracker),
-        resolver=ResolverSpec(kind=resolver, lookahead=lookahead, margin=margin),
-        aircraft=aircraft,
+    return from_dict(
+        {
+            "name": f"ring{n}",
+            "description": f"{n} aircraft on a {radius / 1000:.1f} km ring",
+            "seed": seed,
+            "dt": dt,
+            "duration": float(duration),
+            "separation": {"r_safe": r_safe},
+            "sensor": {"range": sensor_range, "sigma": sigma},
+            "tracker": {"kind": tracker},
+            "resolver": {"kind": resolver, "lookahead": lookahead, "margin": margin},
+            "traffic": {"pattern": "ring", "count": n, "radius": radius, "speed": speed},
+        },
+        source=f"<ring_scenario({n})>",
     )
 
 
 def random_scenario(
     n: int, trackers: bool = True, seed: int = 0, resolver: str = "bands", duration: float = 600.0
 ) -> Scenario:
-    """The benchmark traffic (module docstring): ``n`` aircraft at constant density."""
-    rng = np.random.default_rng(seed)
-    side = 10000.0 * math.sqrt(n)
-    half = side / 2.0
-    pos = np.zeros((0, 2))
-    aircraft = []
-    for i in range(n):
-        for _ in range(1000):  # start more than r_safe from everybody
-            p = rng.uniform(-half, half, 2)
-            if pos.shape[0] == 0 or np.min(np.hypot(*(pos - p).T)) > 3000.0:
-                break
-        pos = np.vstack([pos, p])
-        target = -p + rng.uniform(-0.2 * half, 0.2 * half, 2)
-        if np.hypot(*(target - p)) < half:
-            target = -np.sign(p) * half
-        heading = math.degrees(math.atan2(target[1] - p[1], target[0] - p[0]))
-        aircraft.append(
-            AircraftSpec(
-                id=f"A{i:04d}",
-                position=(float(p[0]), float(p[1])),
-                heading_deg=heading % 360.0,
-                speed=230.0,
-                autopilot="route",
-                waypoints=[(float(target[0]), float(target[1]))],
-            )
-        )
-    return Scenario(
-        name=f"random{n}",
-        seed=seed,
-        dt=1.0,
-        duration=duration,
-        separation=Separation(r_safe=3000.0),
-        sensor=SensorSpec(range=40000.0, sigma=50.0),
-        tracker=TrackerSpec(kind="imm" if trackers else "truth"),
-        resolver=ResolverSpec(kind=resolver, lookahead=120.0),
-        aircraft=aircraft,
+    """The benchmark traffic (module docstring): ``n`` aircraft at constant density
+    (``traffic.pattern = "random"`` in a sector of side ``10 km·√n``)."""
+    return from_dict(
+        {
+            "name": f"random{n}",
+            "seed": seed,
+            "dt": 1.0,
+            "duration": float(duration),
+            "separation": {"r_safe": 3000.0},
+            "sensor": {"range": 40000.0, "sigma": 50.0},
+            "tracker": {"kind": "imm" if trackers else "truth"},
+            "resolver": {"kind": resolver, "lookahead": 120.0},
+            "traffic": {"pattern": "random", "count": n, "sector": 10000.0 * math.sqrt(n)},
+        },
+        source=f"<random_scenario({n})>",
     )
 
 
