@@ -52,6 +52,7 @@ from airspace_sim.dynamics import models
 from airspace_sim.dynamics import presets as _presets
 from airspace_sim.dynamics.truth import noise_factor
 from airspace_sim.errors import UserError
+from airspace_sim.tracking.prediction import relative_positions
 
 POS = list(models.POSITION)
 VEL = list(models.VELOCITY)
@@ -370,13 +371,8 @@ def mode_predictions(imm, cfg: EncounterConfig, dt: float, own_pos=None, own_vel
     """
     steps = max(1, int(round(min(cfg.lookahead_s, cfg.probability_horizon_s) / dt)))
     stride = max(1, steps // 10)
-    xs, Ps = imm.predict_modes(steps)
-    sel = np.arange(stride - 1, steps, stride)
-    xs = xs[:, :, sel][..., POS]
-    Ps = Ps[:, :, sel][..., POS, :][..., POS]
-    if own_pos is not None:
-        t = (sel + 1) * dt
-        xs = xs - (own_pos[:, None, None, :] + t[None, None, :, None] * own_vel[:, None, None, :])
+    at = np.arange(stride, steps + 1, stride)
+    xs, Ps = relative_positions(*imm.predict_modes_at(at), at * dt, own_pos, own_vel)
     return xs[:, None], Ps[:, None], np.asarray(imm.mu)[:, None]
 
 

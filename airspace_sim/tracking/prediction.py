@@ -78,3 +78,20 @@ def _check_steps(steps) -> np.ndarray:
             f"predict_modes_at: steps must be positive and increasing, got {s.tolist()}"
         )
     return s
+
+
+def relative_positions(xs, Ps, times_s, own_position=None, own_velocity=None):
+    """Position parts of mode predictions, relative to an ownship flying straight.
+
+    xs (R, M, S, n), Ps (R, M, S, n, n): predictions of states ``[x, vx, y, vy, Ω]``;
+    times_s (S,) s ahead; own_position, own_velocity (R, 2) m, m/s, or None (predictions
+    already relative). Returns (R, M, S, 2) m and (R, M, S, 2, 2) m²: each mode's predicted
+    intruder position minus ``own_position + t·own_velocity``, and its covariance.
+    """
+    pos = xs[..., (0, 2)]
+    cov = Ps[..., (0, 2), :][..., (0, 2)]
+    if own_position is not None:
+        t = np.asarray(times_s, dtype=float)
+        own = own_position[:, None, :] + t[None, :, None] * own_velocity[:, None, :]  # (R, S, 2)
+        pos = pos - own[:, None]
+    return pos, cov

@@ -30,6 +30,7 @@ from airspace_sim.avoidance import resume_heading_change
 from airspace_sim.avoidance.bands import CLEAR_TOLERANCE
 from airspace_sim.avoidance.cpa import cpa_min_ratio
 from airspace_sim.avoidance.resolvers import build_resolver
+from airspace_sim.tracking.prediction import relative_positions
 from airspace_sim.world.control import Encounters, gather, reachable
 
 #: rad: an autopilot turn smaller than this per step is "on course" (a route autopilot's
@@ -298,10 +299,10 @@ def mode_predictions(
     slots = view.slots[rows]
     for a in range(0, slots.size, chunk):
         sl = slice(a, a + chunk)
-        x, P = tracks.predict_modes_at(steps, slots[sl])
         own = enc.owners[oi[sl]]
-        straight = positions[own][:, None, :] + t[None, :, None] * velocities[own][:, None, :]
-        xs[oi[sl], ki[sl]] = x[..., (0, 2)] - straight[:, None]
-        Ps[oi[sl], ki[sl]] = P[..., (0, 2), :][..., (0, 2)]
+        x, P = tracks.predict_modes_at(steps, slots[sl])
+        xs[oi[sl], ki[sl]], Ps[oi[sl], ki[sl]] = relative_positions(
+            x, P, t, positions[own], velocities[own]
+        )
         mu[oi[sl], ki[sl]] = view.mu[rows[sl]]
     return xs, Ps, mu
