@@ -3,7 +3,7 @@
 The single-model baseline for the IMM (a constant-velocity filter is the classic one) and
 the ``kalman`` tracker plugin (``plugins/kalman_tracker.py``, through :func:`predict` and
 :func:`update`). Same conventions as :class:`~airspace_sim.tracking.IMM`
-(``docs/dev/CONTRACTS.md``): every array has the tracker axis first, one :meth:`step` is a
+(:class:`~airspace_sim.tracking.IMM`): every array has the tracker axis first, one :meth:`step` is a
 predict followed by an update, a NaN measurement row means "no measurement: predict only".
 Everything is numpy over the batch axis (``matmul``/``einsum``); there is no Python loop
 over trackers.
