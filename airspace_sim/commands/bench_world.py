@@ -20,6 +20,7 @@ import json
 import math
 from pathlib import Path
 
+from airspace_sim.commands._args import positive_int
 from airspace_sim.errors import UserError
 
 HELP = "benchmark world steps against the bare IMM step at 100, 1000 and 3000 aircraft"
@@ -27,20 +28,10 @@ HELP = "benchmark world steps against the bare IMM step at 100, 1000 and 3000 ai
 DEFAULT_SIZES = (100, 1000, 3000)
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
-    return value
-
-
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--sizes",
-        type=_positive_int,
+        type=positive_int,
         nargs="+",
         default=list(DEFAULT_SIZES),
         metavar="N",
@@ -48,7 +39,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--steps",
-        type=_positive_int,
+        type=positive_int,
         default=10,
         help="timed steps per size, after 5 untimed warm-up steps (default 10)",
     )

@@ -50,6 +50,7 @@ import numpy as np
 
 from airspace_sim.dynamics import models
 from airspace_sim.dynamics import presets as _presets
+from airspace_sim.dynamics.markov import mode_cdf, next_modes
 from airspace_sim.dynamics.truth import noise_factor
 from airspace_sim.errors import UserError
 from airspace_sim.tracking.prediction import relative_positions
@@ -193,16 +194,6 @@ def draw_encounters(seed: int, indices, cfg: EncounterConfig) -> dict:
         out["v"].append(rng.standard_normal((T, 2)))
         out["e0"].append(rng.standard_normal(models.N_STATE))
     return {k: np.asarray(v, dtype=float) for k, v in out.items()}
-
-
-def next_modes(cdf: np.ndarray, previous: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """Inverse-CDF mode sampling with pre-drawn uniforms (as ``truth.sample_modes``)."""
-    return (u[:, None] >= cdf[previous]).sum(axis=-1)
-
-
-def mode_cdf(preset) -> np.ndarray:
-    cdf = np.cumsum(np.asarray(preset.transition_matrix, dtype=float), axis=1)
-    return cdf / cdf[:, -1:]
 
 
 # ----------------------------------------------------------------------------- geometry
@@ -446,7 +437,7 @@ def oracle_relative(
     draws = draw_encounters(seed, indices, cfg)
     rates = np.asarray(preset.turn_rates, dtype=float)
     F = models.transition(rates, dt)
-    cdf = mode_cdf(preset)
+    cdf = mode_cdf(preset.transition_matrix)
     phis = np.concatenate(
         [[0.0], np.linspace(-np.pi, np.pi, n_angles, endpoint=False) + np.pi / n_angles]
     )
@@ -512,7 +503,7 @@ def run_relative(
     draws = draw_encounters(seed, indices, cfg)
     rates = np.asarray(preset.turn_rates, dtype=float)
     F = models.transition(rates, dt)
-    cdf = mode_cdf(preset)
+    cdf = mode_cdf(preset.transition_matrix)
     sigma = cfg.sigma()
     res = make_resolver(resolver, cfg, dt)
     probabilistic = res.uses_mode_predictions

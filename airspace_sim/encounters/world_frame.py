@@ -32,6 +32,7 @@ from __future__ import annotations
 import numpy as np
 
 from airspace_sim.dynamics import models
+from airspace_sim.dynamics.markov import mode_cdf, next_modes
 from airspace_sim.encounters.relative import (
     POS,
     STRAIGHT,
@@ -48,9 +49,7 @@ from airspace_sim.encounters.relative import (
     initial_geometry,
     make_imm,
     make_resolver,
-    mode_cdf,
     mode_predictions,
-    next_modes,
     segment_distance_to_origin,
 )
 from airspace_sim.errors import UserError
@@ -75,7 +74,7 @@ def world_setup(seed: int, indices, cfg: EncounterConfig):
     B = len(draws["speed"])
     rates = np.asarray(preset.turn_rates, dtype=float)
     F = models.transition(rates, dt)
-    cdf = mode_cdf(preset)
+    cdf = mode_cdf(preset.transition_matrix)
     p0, u = initial_geometry(draws, cfg)
     own = np.zeros((B, 5))
     h = draws["own_heading"]
@@ -128,7 +127,7 @@ def run_world(
     dt, T = preset.dt, cfg.n_steps()
     draws, own, truth, modes = world_setup(seed, indices, cfg)
     rates = np.asarray(preset.turn_rates, dtype=float)
-    own_cdf = mode_cdf(preset)
+    own_cdf = mode_cdf(preset.transition_matrix)
     sigma = cfg.sigma()
     res = make_resolver(resolver, cfg, dt)
     probabilistic = res.uses_mode_predictions

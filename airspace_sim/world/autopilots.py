@@ -15,15 +15,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from airspace_sim.dynamics.markov import mode_cdf, next_modes
 from airspace_sim.dynamics.presets import Preset
+from airspace_sim.geometry import wrap_angle
 from airspace_sim.parts import Autopilot, NoParams
 from airspace_sim.registry import register
 from airspace_sim.world import streams
-
-
-def wrap(a):
-    """Angle(s) wrapped to [−π, π)."""
-    return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi
 
 
 @dataclass
@@ -51,7 +48,7 @@ class AutopilotContext:
 def _toward(target_heading, state, members):
     h = state.headings[members]
     lim = state.max_turn_rate[members]
-    return np.clip(wrap(target_heading - h) / state.dt, -lim, lim)
+    return np.clip(wrap_angle(target_heading - h) / state.dt, -lim, lim)
 
 
 @register("autopilot", "straight")
@@ -209,11 +206,9 @@ class MarkovAutopilot(Autopilot):
         self.members = np.asarray(members, dtype=np.int64)
         self.keys = context.keys[self.members]
         self.rates = np.asarray(context.preset.turn_rates, dtype=float)
-        Pi = np.asarray(context.preset.transition_matrix, dtype=float)
-        self.cdf = np.cumsum(Pi, axis=1)
-        mu0 = np.cumsum(context.preset.mu0())
+        self.cdf = mode_cdf(context.preset.transition_matrix)
         u = streams.uniform(self.keys, streams.INITIAL_MODE, 0)
-        self.modes = np.minimum((u[:, None] >= mu0[None, :]).sum(axis=1), len(self.rates) - 1)
+        self.modes = next_modes(mode_cdf(context.preset.mu0()[None, :]), np.zeros_like(u, int), u)
         self._last_step = -1
 
     def desired_heading(self, state):
@@ -223,8 +218,7 @@ class MarkovAutopilot(Autopilot):
         if state.step != self._last_step:  # draw the mode of the coming step once
             self._last_step = state.step
             u = streams.uniform(self.keys, streams.MODE, state.step)
-            cdf = self.cdf[self.modes]
-            self.modes = np.minimum((u[:, None] >= cdf).sum(axis=1), len(self.rates) - 1)
+            self.modes = next_modes(self.cdf, self.modes, u)
         lim = state.max_turn_rate[self.members]
         return np.clip(self.rates[self.modes], -lim, lim)
 
