@@ -44,22 +44,10 @@ def build_aircraft(
     t = scenario.traffic
     if t.pattern == "none" or t.count == 0:
         return hand
-    builders = {"ring": ring, "random": random_sector, "encounter": encounter}
-    if t.pattern not in builders:
-        raise UserError(
-            f"{scenario.source}: traffic.pattern: expected one of none, {', '.join(builders)}, "
-            f"got {t.pattern!r}"
-        )
-    generated = builders[t.pattern](scenario, rng)
+    # the loader checked the pattern and that no hand-placed id clashes with a generated one
+    generated = BUILDERS[t.pattern](scenario, rng)
     for i, a in enumerate(generated):
         a.controlled = i < t.controlled
-    taken = {a.id for a in hand}
-    clash = [a.id for a in generated if a.id in taken]
-    if clash:
-        raise UserError(
-            f"{scenario.source}: aircraft id {clash[0]!r} clashes with a generated "
-            f"{t.pattern} aircraft id; rename the hand-placed aircraft"
-        )
     return hand + generated
 
 
@@ -231,3 +219,7 @@ def encounter(scenario: Scenario, rng: np.random.Generator) -> list[AircraftSpec
             )
         out.append(_spec(scenario, aid, own_pos + rel, heading, speeds[i], avoid=False))
     return out
+
+
+#: Generator of each ``traffic.pattern`` (the loader's ``TRAFFIC_PATTERNS``).
+BUILDERS = {"ring": ring, "random": random_sector, "encounter": encounter}
