@@ -140,7 +140,12 @@ class World:
         self.airspace = Airspace(self.positions, self.r_safe, self.nmac_distance, self.sensor_range)
         self.in_los = np.zeros(n, dtype=bool)
         self.nmac = np.zeros(n, dtype=bool)
-        self._sense_track_detect(first=True)
+        # the phases after motion, for the initial positions (no tracking errors recorded)
+        self._update_contact_flags()
+        scan = self._surveillance()
+        self.tracks.update(self.time, *scan, self.active, self._true_states())
+        self._detection()
+        self._record_metrics(tracking=False)
 
     # ------------------------------------------------------------ read-only
     @property
@@ -163,7 +168,16 @@ class World:
         """
         rate = self._commands(heading_rate)
         self._motion(rate)
-        self._sense_track_detect(first=False)
+        scan = self._surveillance()
+        self.tracks.update(self.time, *scan, self.active, self._true_states())
+        self._detection()
+        self._record_metrics()
+
+    def _detection(self) -> None:
+        """Phase 5: advice and conflict flags for the coming step (the CDA policy)."""
+        self.policy.advise(
+            self.tracks, self.positions, self.velocities, self.active, self.max_turn_rate * self.dt
+        )
 
     def flight_state(self) -> FlightState:
         """The true kinematic state as autopilots see it (arrays, not copies)."""
@@ -222,27 +236,21 @@ class World:
             self.active[gone] = False
             self.airspace.remove(np.flatnonzero(gone))
         self.velocities = self._velocities()
+        self._update_contact_flags()
 
-    def _sense_track_detect(self, first: bool) -> None:
-        """Phases 3–6: contacts, surveillance, tracking, detection, metrics."""
-        sp = self.airspace
+    def _update_contact_flags(self) -> None:
+        """``in_los`` and ``nmac`` (N,) from the pymunk pair sets."""
         for kind, flag in ((LOS, self.in_los), (NMAC, self.nmac)):
-            i, j = sp.pair_arrays(kind)
+            i, j = self.airspace.pair_arrays(kind)
             flag[:] = False
             flag[i] = True
             flag[j] = True
-        owner, intruder, z, scanned = self._surveillance()
-        self.tracks.update(self.time, scanned, owner, intruder, z, self.active, self._true_states())
-        self.policy.advise(
-            self.tracks, self.positions, self.velocities, self.active, self.max_turn_rate * self.dt
-        )
-        self._record_metrics(first)
 
     def _surveillance(self):
-        """Phase 3: ``(owner (D,), intruder (D,), z (D, 2) m, scanned)`` of this step."""
+        """Phase 3: ``(scanned, owner (D,), intruder (D,), z (D, 2) m)`` of this step."""
         none = np.zeros(0, np.int64)
         if not self.sensor.scans(self.step_count):
-            return none, none, np.zeros((0, 2)), False
+            return False, none, none, np.zeros((0, 2))
         i, j = self.airspace.pair_arrays(RANGE)
         owner = np.concatenate([i, j])
         intruder = np.concatenate([j, i])
@@ -250,16 +258,16 @@ class World:
         owner, intruder = owner[keep], intruder[keep]
         pk = streams.pair_keys(self.keys, owner, intruder)
         z, det = self.sensor.measure(owner, intruder, self.positions, pk, self.step_count)
-        return owner[det], intruder[det], z[det], True
+        return True, owner[det], intruder[det], z[det]
 
-    def _record_metrics(self, first: bool) -> None:
-        """Phase 6."""
+    def _record_metrics(self, tracking: bool = True) -> None:
+        """Phase 6: contacts, conflicts and (``tracking``) track errors."""
         m = self.metrics_acc
         sp = self.airspace
         m.contacts(self.positions, sp.pairs, sp.began)
         m.conflicts(self.conflict)
         view = self.tracks.view()
-        if first or not len(view.owner):
+        if not tracking or not len(view.owner):
             return
         est_mode = true_mode = None
         markov = self.modes[view.intruder] >= 0
