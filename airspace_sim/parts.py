@@ -243,7 +243,8 @@ class Resolver(ABC):
     #: ``params.r_safe``, ``params.lookahead_s`` and ``params.margin`` (so the world runs
     #: it only on the ownships that fail it)
     prefilter: ClassVar[bool] = False
-    #: the output carries ``candidates`` and ``band`` (the CDA policy can commit a side)
+    #: the output carries ``candidates``, ``first_clear`` and ``best_blocked`` (the CDA
+    #: policy can commit a turn side; :class:`~airspace_sim.avoidance.resolvers.ResolverOutput`)
     reports_band: ClassVar[bool] = False
 
     params: object
