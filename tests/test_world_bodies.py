@@ -295,6 +295,10 @@ def test_busy_random_traffic_pairs_and_begin_events_equal_brute_force(spatial_ha
                 ended_total[t] += len(prev[t] - now)
             prev[t] = now
     assert min(began_total[t] for t in SETS) > 0 and min(ended_total[t] for t in SETS) > 0
+    # the three copies of every aircraft (one body per set's space) are at the same place
+    for t in SETS:
+        at = np.array([tuple(b.position) for b in sp.bodies[t]])
+        assert at[sp.in_space].tobytes() == pos[sp.in_space].tobytes(), t
     assert began_total[RANGE] > 500 and ended_total[RANGE] > 500
 
 
