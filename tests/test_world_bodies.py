@@ -12,7 +12,15 @@ from airspace_sim.scenarios.schema import (
     TrackerSpec,
 )
 from airspace_sim.world import World
-from airspace_sim.world.bodies import LOS, NMAC, RANGE, Airspace
+from airspace_sim.world.bodies import (
+    LOS,
+    NMAC,
+    RANGE,
+    SETS,
+    Airspace,
+    _delete_sorted,
+    _insert_sorted,
+)
 
 
 def busy_scenario(n=30, side=30000.0, seed=3, nmac=1000.0, sensor_range=8000.0):
@@ -234,3 +242,90 @@ def test_unpickling_checks_the_rebuilt_contacts_against_the_stored_pairs():
     broken = Airspace.__new__(Airspace)
     with pytest.raises(RuntimeError, match="set 1 differ from the stored pairs"):
         broken.__setstate__(state)
+
+
+# ----------------------------------------------------------------- busy random traffic
+
+
+def _random_flight(n, side, seed, steps, speed=230.0, turn_sigma=0.1):
+    """Positions (N, 2) m and a generator of (N, 2) m/s velocities of aircraft turning at
+    random in a square of side ``side`` m."""
+    rng = np.random.default_rng(seed)
+    pos0 = rng.uniform(-side / 2, side / 2, (n, 2))
+    heading = rng.uniform(-np.pi, np.pi, n)
+
+    def velocities():
+        for _ in range(steps):
+            heading[:] += rng.normal(0.0, turn_sigma, n)
+            yield speed * np.stack([np.cos(heading), np.sin(heading)], axis=1)
+
+    return pos0, velocities()
+
+
+@pytest.mark.parametrize("spatial_hash", [False, True])
+def test_busy_random_traffic_pairs_and_begin_events_equal_brute_force(spatial_hash):
+    # 300 aircraft, one per 30 km² (3x the benchmark's density), 20 km range circles
+    # (~1300 range pairs), 2 s steps at 230 m/s: every step many range pairs begin and
+    # end, and several LoS / NMAC pairs. Oracle: brute-force distances; the begun pairs of
+    # a step are exactly the brute-force pairs that were not there the step before, the
+    # ended ones those that were there and are not now (pair sets equal every step).
+    n, side = 300, 95000.0
+    radii = {LOS: 3000.0, NMAC: 1000.0, RANGE: 20000.0}
+    pos, velocities = _random_flight(n, side, seed=11, steps=60)
+    sp = Airspace(pos, radii[LOS], radii[NMAC], radii[RANGE], spatial_hash=spatial_hash)
+    prev = {t: brute_pairs(pos, r) for t, r in radii.items()}
+    for t in SETS:
+        assert airspace_pairs(sp, t) == prev[t]
+        assert set(map(tuple, sp.began[t].tolist())) == prev[t]  # all begin at the start
+    began_total = {t: 0 for t in SETS}
+    ended_total = {t: 0 for t in SETS}
+    pos = pos.copy()
+    for k, v in enumerate(velocities):
+        if k == 25:
+            sp.remove([3, 150])
+        sp.set_velocities(v)
+        sp.step(2.0, pos)
+        for t, r in radii.items():
+            now = brute_pairs(pos, r, active=sp.in_space)
+            assert airspace_pairs(sp, t) == now, (t, k)
+            began = sp.began[t]
+            assert list(map(tuple, began.tolist())) == sorted(now - prev[t]), (t, k)  # sorted
+            if k != 25:  # the removal's ends are not in the step's difference
+                began_total[t] += len(now - prev[t])
+                ended_total[t] += len(prev[t] - now)
+            prev[t] = now
+    assert min(began_total[t] for t in SETS) > 0 and min(ended_total[t] for t in SETS) > 0
+    # the three copies of every aircraft (one body per set's space) are at the same place
+    for t in SETS:
+        at = np.array([tuple(b.position) for b in sp.bodies[t]])
+        assert at[sp.in_space].tobytes() == pos[sp.in_space].tobytes(), t
+    assert began_total[RANGE] > 500 and ended_total[RANGE] > 500
+
+
+def test_pairs_overlapping_at_the_start_separate_at_the_first_step():
+    # The begin handler is installed after the priming step: the arbiters created there
+    # must still report their separation at the very next step, in the original and in a
+    # copy made before any step.
+    start = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 50000.0]])
+    sp = Airspace(start, r_safe=3000.0, nmac=1000.0, sensor_range=8000.0)
+    assert [len(sp.pairs[t]) for t in SETS] == [1, 1, 1]
+    assert all(sp.began[t].tolist() == [[0, 1]] for t in SETS)
+    for s in [sp, *_copies(sp)]:
+        pos = start.copy()
+        s.set_velocities(np.array([[0.0, 0.0], [20000.0, 0.0], [0.0, 0.0]]))
+        s.step(1.0, pos)
+        assert [len(s.pairs[t]) for t in SETS] == [0, 0, 0]
+        assert all(s.began[t].size == 0 for t in SETS)
+        s.set_velocities(np.array([[0.0, 0.0], [-20000.0, 0.0], [0.0, 0.0]]))
+        s.step(1.0, pos)  # back where it started: every set begins again, once
+        assert all(s.began[t].tolist() == [[0, 1]] for t in SETS)
+
+
+def test_sorted_key_updates_equal_numpy_set_operations():
+    rng = np.random.default_rng(2)
+    for _ in range(300):
+        keys = np.unique(rng.integers(0, 200, rng.integers(0, 60)))
+        new = np.unique(rng.integers(0, 200, rng.integers(0, 10)))
+        gone = rng.integers(0, 200, rng.integers(0, 10))  # unsorted, repeats, absent keys
+        assert np.array_equal(_insert_sorted(keys, new), np.union1d(keys, new))
+        assert np.array_equal(_delete_sorted(keys, gone), keys[~np.isin(keys, gone)])
