@@ -61,7 +61,14 @@ def test_radar_measure_same_bits(pd, sigma):
     radar = Radar(SensorSpec(sigma=sigma, detection_probability=pd), 1.0)
     for step in (0, 4):
         z, det = radar.measure(owner, intruder, positions, pk, step)
-        z_ref, det_ref = radar.measure_numpy(owner, intruder, positions, pk, step)
+        # the same draws from the numpy references
+        det_ref = np.ones(owner.size, bool)
+        if pd < 1.0:
+            det_ref = streams.uniform_numpy(pk, streams.DETECT, step) < pd
+        z_ref = positions[intruder].copy()
+        if sigma > 0:
+            z_ref[:, 0] += sigma * streams.normal_numpy(pk, streams.NOISE_X, step)
+            z_ref[:, 1] += sigma * streams.normal_numpy(pk, streams.NOISE_Y, step)
         assert z.shape == (owner.size, 2) and det.dtype == bool
         np.testing.assert_array_equal(z, z_ref)
         np.testing.assert_array_equal(det, det_ref)

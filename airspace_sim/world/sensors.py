@@ -15,7 +15,6 @@ intruder's (``docs/paper-notes.md`` §3, weakness 1).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from airspace_sim.parts import NoParams, Sensor
 from airspace_sim.registry import register
@@ -41,48 +40,13 @@ class Radar(Sensor):
         return step % self.period_steps == 0
 
     def measure(self, owner, intruder, positions, pair_keys, step):
-        truth = np.ascontiguousarray(positions[intruder], dtype=float)
-        keys = np.ascontiguousarray(pair_keys, dtype=np.uint64)
-        wx1, wx2 = streams.normal_words(streams.NOISE_X, step)
-        wy1, wy2 = streams.normal_words(streams.NOISE_Y, step)
-        return _radar_kernel(
-            truth,
-            keys,
-            self.sigma,
-            self.pd,
-            streams.counter_word(streams.DETECT, step),
-            wx1,
-            wx2,
-            wy1,
-            wy2,
-        )
-
-    def measure_numpy(self, owner, intruder, positions, pair_keys, step):
-        """:meth:`measure` with the numpy streams (the reference for :func:`_radar_kernel`)."""
         truth = positions[intruder]
         if self.pd >= 1.0:
             detected = np.ones(owner.size, dtype=bool)
         else:
-            detected = streams.uniform_numpy(pair_keys, streams.DETECT, step) < self.pd
+            detected = streams.uniform(pair_keys, streams.DETECT, step) < self.pd
         z = truth.copy()
         if self.sigma > 0:
-            z[:, 0] += self.sigma * streams.normal_numpy(pair_keys, streams.NOISE_X, step)
-            z[:, 1] += self.sigma * streams.normal_numpy(pair_keys, streams.NOISE_Y, step)
+            z[:, 0] += self.sigma * streams.normal(pair_keys, streams.NOISE_X, step)
+            z[:, 1] += self.sigma * streams.normal(pair_keys, streams.NOISE_Y, step)
         return z, detected
-
-
-@njit(cache=True)
-def _radar_kernel(truth, keys, sigma, pd, w_detect, wx1, wx2, wy1, wy2):  # pragma: no cover
-    """``(z (P, 2) m, detected (P,) bool)`` of :meth:`Radar.measure` for the intruders' true
-    positions ``truth`` (P, 2) m and pair keys (P,) uint64; the counter words are those of
-    the DETECT uniform and the NOISE_X, NOISE_Y normals (:mod:`.streams`)."""
-    P = keys.size
-    z = truth.copy()
-    detected = np.ones(P, dtype=np.bool_)
-    for p in range(P):
-        if pd < 1.0:
-            detected[p] = streams.draw_uniform(keys[p], w_detect) < pd
-        if sigma > 0:
-            z[p, 0] += sigma * streams.draw_normal(keys[p], wx1, wx2)
-            z[p, 1] += sigma * streams.draw_normal(keys[p], wy1, wy2)
-    return z, detected

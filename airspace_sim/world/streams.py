@@ -7,9 +7,11 @@ not depend on the order in which aircraft or pairs are visited, nor on which oth
 exist, and nothing is shared between worlds (no module-level mutable state).
 
 :func:`uniform` and :func:`normal` run as numba kernels built on the scalar functions
-:func:`draw_uniform` and :func:`draw_normal` (which other kernels call too, e.g. the
-radar's); :func:`uniform_numpy` and :func:`normal_numpy` are the same arithmetic in numpy,
-the reference the tests compare against bit for bit.
+:func:`draw_uniform` and :func:`draw_normal`; :func:`uniform_numpy` and
+:func:`normal_numpy` are the same arithmetic in numpy, the reference the tests compare
+against bit for bit. The integer hash is exact; the normals' log and cos are libm's in
+numba, and numpy's agree with libm's where numpy does not use SIMD versions of them (on
+CPUs where it does, e.g. some AVX-512 builds, a last-ulp difference would fail those tests).
 """
 
 from __future__ import annotations
@@ -60,16 +62,6 @@ def _counter_word(stream: int, step: int) -> np.uint64:
     return mix(np.array([word], dtype=np.uint64))[0]
 
 
-def counter_word(stream: int, step: int) -> np.uint64:
-    """The mixed ``(stream, step)`` word a draw's key is combined with (uint64)."""
-    return _counter_word(stream, step)
-
-
-def normal_words(stream: int, step: int) -> tuple[np.uint64, np.uint64]:
-    """The two counter words of :func:`normal`'s uniforms for ``stream`` at ``step``."""
-    return _counter_word(2 * stream + 1000, step), _counter_word(2 * stream + 1001, step)
-
-
 @njit(cache=True)
 def _mix_scalar(z):  # pragma: no cover - compiled
     """:func:`mix` of one uint64 (numba wraps uint64 products like numpy)."""
@@ -80,14 +72,16 @@ def _mix_scalar(z):  # pragma: no cover - compiled
 
 @njit(cache=True)
 def draw_uniform(key, word):  # pragma: no cover - compiled
-    """One :func:`uniform` number in [0, 1) from a uint64 key and a :func:`counter_word`."""
+    """One :func:`uniform` number in [0, 1) from a uint64 key and a counter word
+    (:func:`_counter_word` of the stream and step)."""
     z = _mix_scalar(_mix_scalar(key ^ word) + _GOLDEN)
     return np.float64(z >> _S11) * _TWO_M53
 
 
 @njit(cache=True)
 def draw_normal(key, word1, word2):  # pragma: no cover - compiled
-    """One :func:`normal` number from a uint64 key and the two :func:`normal_words`."""
+    """One :func:`normal` number from a uint64 key and the counter words of its two
+    uniforms (streams ``2·stream + 1000`` and ``2·stream + 1001``)."""
     u1 = 1.0 - draw_uniform(key, word1)  # (0, 1]
     u2 = draw_uniform(key, word2)
     return np.sqrt(-2.0 * np.log(u1)) * np.cos(2.0 * np.pi * u2)
@@ -121,7 +115,8 @@ def normal(keys: np.ndarray, stream: int, step: int) -> np.ndarray:
     """Standard normal numbers, one per key (Box–Muller on two counter-based uniforms),
     shape of ``keys``."""
     k = np.ascontiguousarray(keys, dtype=np.uint64)
-    w1, w2 = normal_words(stream, step)
+    w1 = _counter_word(2 * stream + 1000, step)
+    w2 = _counter_word(2 * stream + 1001, step)
     return _normal_kernel(k.reshape(-1), w1, w2).reshape(k.shape)
 
 
