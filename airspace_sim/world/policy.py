@@ -28,10 +28,9 @@ import numpy as np
 
 from airspace_sim.avoidance import resume_heading_change
 from airspace_sim.avoidance.bands import CLEAR_TOLERANCE
-from airspace_sim.avoidance.cpa import cpa_min_ratio
 from airspace_sim.avoidance.resolvers import build_resolver
 from airspace_sim.tracking.prediction import relative_positions
-from airspace_sim.world.control import Encounters, gather, reachable
+from airspace_sim.world.control import Encounters, gather, screen
 
 #: rad: an autopilot turn smaller than this per step is "on course" (a route autopilot's
 #: atan2 gives ~1e-16 rad/s on a straight leg, which must not count as turning back)
@@ -212,19 +211,12 @@ class AvoidancePolicy:
 
     def _prefilter(self, enc: Encounters, velocities) -> Encounters:
         """Only the ownships whose current heading fails the resolver's own CPA test, and on
-        them only the intruders some heading could bring within the clear radius."""
+        them only the intruders some heading could bring within the clear radius (one numba
+        pass, :func:`.control.screen`)."""
         clear_radius = self.r_safe * (1.0 + self.margin)
-        ratio0 = cpa_min_ratio(
-            velocities[enc.owners],
-            enc.rel_position,
-            enc.rel_velocity,
-            enc.valid,
-            np.zeros((enc.owners.size, 1)),
-            clear_radius,
-            self.lookahead_s,
-        )[:, 0]
-        enc = enc.subset(~(ratio0 >= 1.0 - CLEAR_TOLERANCE))
-        return enc.compact(reachable(enc, velocities[enc.owners], clear_radius, self.lookahead_s))
+        return screen(
+            enc, velocities[enc.owners], clear_radius, self.lookahead_s, 1.0 - CLEAR_TOLERANCE
+        )
 
     def _commit(self, psi, conflict, side, cand, first_clear, best_blocked=None):
         """Heading changes and sides under the turn preference.

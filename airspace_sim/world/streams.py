@@ -5,11 +5,19 @@ aircraft keys come from ``numpy.random.SeedSequence(seed).spawn``, and a draw fo
 ``i`` at step ``k`` is ``splitmix64`` of its key mixed with ``(stream, k)``. So results do
 not depend on the order in which aircraft or pairs are visited, nor on which other aircraft
 exist, and nothing is shared between worlds (no module-level mutable state).
+
+:func:`uniform` and :func:`normal` run as numba kernels built on the scalar functions
+:func:`draw_uniform` and :func:`draw_normal`; :func:`uniform_numpy` and
+:func:`normal_numpy` are the same arithmetic in numpy, the reference the tests compare
+against bit for bit. The integer hash is exact; the normals' log and cos are libm's in
+numba, and numpy's agree with libm's where numpy does not use SIMD versions of them (on
+CPUs where it does, e.g. some AVX-512 builds, a last-ulp difference would fail those tests).
 """
 
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _M1 = np.uint64(0xBF58476D1CE4E5B9)
@@ -54,15 +62,73 @@ def _counter_word(stream: int, step: int) -> np.uint64:
     return mix(np.array([word], dtype=np.uint64))[0]
 
 
+@njit(cache=True)
+def _mix_scalar(z):  # pragma: no cover - compiled
+    """:func:`mix` of one uint64 (numba wraps uint64 products like numpy)."""
+    z = (z ^ (z >> _S30)) * _M1
+    z = (z ^ (z >> _S27)) * _M2
+    return z ^ (z >> _S31)
+
+
+@njit(cache=True)
+def draw_uniform(key, word):  # pragma: no cover - compiled
+    """One :func:`uniform` number in [0, 1) from a uint64 key and a counter word
+    (:func:`_counter_word` of the stream and step)."""
+    z = _mix_scalar(_mix_scalar(key ^ word) + _GOLDEN)
+    return np.float64(z >> _S11) * _TWO_M53
+
+
+@njit(cache=True)
+def draw_normal(key, word1, word2):  # pragma: no cover - compiled
+    """One :func:`normal` number from a uint64 key and the counter words of its two
+    uniforms (streams ``2·stream + 1000`` and ``2·stream + 1001``)."""
+    u1 = 1.0 - draw_uniform(key, word1)  # (0, 1]
+    u2 = draw_uniform(key, word2)
+    return np.sqrt(-2.0 * np.log(u1)) * np.cos(2.0 * np.pi * u2)
+
+
+@njit(cache=True)
+def _uniform_kernel(keys, word):  # pragma: no cover - compiled
+    """(P,) uniforms of the (P,) uint64 keys."""
+    out = np.empty(keys.size)
+    for p in range(keys.size):
+        out[p] = draw_uniform(keys[p], word)
+    return out
+
+
+@njit(cache=True)
+def _normal_kernel(keys, word1, word2):  # pragma: no cover - compiled
+    """(P,) standard normals of the (P,) uint64 keys."""
+    out = np.empty(keys.size)
+    for p in range(keys.size):
+        out[p] = draw_normal(keys[p], word1, word2)
+    return out
+
+
 def uniform(keys: np.ndarray, stream: int, step: int) -> np.ndarray:
     """Uniform numbers in [0, 1), one per key, for this (stream, step), shape of ``keys``."""
+    k = np.ascontiguousarray(keys, dtype=np.uint64)
+    return _uniform_kernel(k.reshape(-1), _counter_word(stream, step)).reshape(k.shape)
+
+
+def normal(keys: np.ndarray, stream: int, step: int) -> np.ndarray:
+    """Standard normal numbers, one per key (Box–Muller on two counter-based uniforms),
+    shape of ``keys``."""
+    k = np.ascontiguousarray(keys, dtype=np.uint64)
+    w1 = _counter_word(2 * stream + 1000, step)
+    w2 = _counter_word(2 * stream + 1001, step)
+    return _normal_kernel(k.reshape(-1), w1, w2).reshape(k.shape)
+
+
+def uniform_numpy(keys: np.ndarray, stream: int, step: int) -> np.ndarray:
+    """:func:`uniform` in numpy (the reference for the kernel)."""
     with np.errstate(over="ignore"):
         z = mix(mix(np.asarray(keys, dtype=np.uint64) ^ _counter_word(stream, step)) + _GOLDEN)
     return (z >> _S11).astype(np.float64) * _TWO_M53
 
 
-def normal(keys: np.ndarray, stream: int, step: int) -> np.ndarray:
-    """Standard normal numbers, one per key (Box–Muller on two counter-based uniforms)."""
-    u1 = 1.0 - uniform(keys, 2 * stream + 1000, step)  # (0, 1]
-    u2 = uniform(keys, 2 * stream + 1001, step)
+def normal_numpy(keys: np.ndarray, stream: int, step: int) -> np.ndarray:
+    """:func:`normal` in numpy (the reference for the kernel)."""
+    u1 = 1.0 - uniform_numpy(keys, 2 * stream + 1000, step)  # (0, 1]
+    u2 = uniform_numpy(keys, 2 * stream + 1001, step)
     return np.sqrt(-2.0 * np.log(u1)) * np.cos(2.0 * np.pi * u2)
