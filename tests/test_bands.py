@@ -439,3 +439,32 @@ def test_first_clear_search_equals_the_full_band(seed):  # noqa: D103
         score = np.where(on_side & ~np.isnan(full.candidates), full.min_ratio, -np.inf)
         rows = np.flatnonzero(blocked[:, col])
         np.testing.assert_array_equal(full.best_blocked[rows, col], np.argmax(score[rows], axis=1))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_boundary_kernel_gives_the_numpy_candidates_choices(seed, monkeypatch):
+    """band_search with the numba boundary kernel makes the same choices as with the numpy
+    reference candidates (``exact_boundary_candidates_numpy``) on many random encounters."""
+    from airspace_sim.avoidance import bands
+
+    rng = np.random.default_rng(100 + seed)
+    n, k = 150, 12
+    vo, r, v, valid = random_scene(rng, n, k, spread=15000.0)
+    mx = rng.uniform(0.0, np.pi, n)
+    radius = rng.uniform(2000.0, 4000.0, (n, k))
+    runs = []
+    for fn in (bands.exact_boundary_candidates, bands.exact_boundary_candidates_numpy):
+        monkeypatch.setattr(bands, "exact_boundary_candidates", fn)
+        for full, penalty in ((False, 0.0), (True, 0.0), (False, 0.1)):
+            runs.append(
+                band_search(vo, r, v, valid, mx, radius, 120.0, 0.1, RES, True, penalty, full=full)
+            )
+    for fast, ref in zip(runs[:3], runs[3:]):
+        # equal here; elsewhere numpy's SIMD sin/cos may differ from libm in the last bits
+        assert np.array_equal(np.isnan(fast.candidates), np.isnan(ref.candidates))
+        assert np.nanmax(np.abs(fast.candidates - ref.candidates)) <= 1e-12
+        assert np.all(np.abs(fast.heading_change - ref.heading_change) <= 1e-12)
+        assert np.array_equal(fast.conflict, ref.conflict)
+        assert np.array_equal(fast.first_clear, ref.first_clear)
+        assert np.array_equal(fast.best_blocked, ref.best_blocked)
+    assert runs[0].conflict.sum() > n // 4  # the scene exercises the search

@@ -36,6 +36,7 @@ from airspace_sim.avoidance.cpa import (
     first_clear_search,
 )
 from airspace_sim.avoidance.heading import (
+    boundary_heading_changes,
     range_at_time_heading_changes,
     tangent_heading_changes,
     wrap_angle,
@@ -106,11 +107,29 @@ def candidate_grid(max_heading_change, resolution, extra=None):
 
 
 def exact_boundary_candidates(own_velocity, rel_position, rel_velocity, valid, radius, lookahead_s):
-    """Exact boundary heading changes of each intruder's clear set, ``(N, 6K)`` (NaN if none).
+    """Exact boundary heading changes of each intruder's clear set, ``(N, 6K)`` rad (NaN if none).
 
     Both tangents from :func:`~airspace_sim.avoidance.heading.tangent_heading_changes` (two
-    roots each) and the two roots of ``|r + T·v_rel(ψ)| = radius``.
+    roots each) and the two roots of ``|r + T·v_rel(ψ)| = radius``, intruder ``k`` in columns
+    ``6k … 6k+5``; invalid slots NaN. Own velocity (N, 2) m/s, relative position and velocity
+    (N, K, 2) m and m/s, valid (N, K), radius float or (N, K) m, ``lookahead_s`` s. One numba
+    pass (:func:`~airspace_sim.avoidance.heading.boundary_heading_changes`);
+    :func:`exact_boundary_candidates_numpy` is the reference.
     """
+    vo = np.ascontiguousarray(own_velocity, dtype=float)
+    r = np.ascontiguousarray(rel_position, dtype=float)
+    vi = np.ascontiguousarray(np.asarray(rel_velocity, dtype=float) + vo[:, None, :])
+    valid = np.ascontiguousarray(valid, dtype=bool)
+    radius = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, dtype=float), r.shape[:-1]))
+    out = boundary_heading_changes(vo, r, vi, valid, radius, float(lookahead_s))
+    return out.reshape(out.shape[0], -1)
+
+
+def exact_boundary_candidates_numpy(
+    own_velocity, rel_position, rel_velocity, valid, radius, lookahead_s
+):
+    """:func:`exact_boundary_candidates` from the numpy functions of
+    :mod:`~airspace_sim.avoidance.heading` (the reference for the kernel), ``(N, 6K)``."""
     vo = np.asarray(own_velocity, dtype=float)[:, None, :]
     r = np.asarray(rel_position, dtype=float)
     vi = np.asarray(rel_velocity, dtype=float) + vo
