@@ -194,6 +194,7 @@ def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - comp
     xv, xm, xl, xi = rv.copy(), rm.copy(), rl.copy(), ri.copy()
     ov, om, ol, oi = rv.copy(), rm.copy(), rl.copy(), ri.copy()
     tail = np.empty((4, n_cand))
+    nt = np.zeros(4, np.int64)  # tail counts: (inf, right), (inf, left), (NaN, right), ...
     for n in range(n_own):
         lim = mx[n] * (1 + 1e-12) + 1e-15
         for j in range(n_cand):
@@ -222,7 +223,7 @@ def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - comp
         # limits and extras of finite mag listed right turns first, then a stable insertion
         # sort by mag (a few dozen per row); the rest into the inf / NaN tail lists
         nx = nxl = 0
-        nt = np.zeros(4, np.int64)  # tail counts: (inf, right), (inf, left), (NaN, ...)
+        nt[:] = 0
         for j in range(n_cand):
             c = row[j]
             left = c > 0.0
