@@ -439,3 +439,67 @@ def test_first_clear_search_equals_the_full_band(seed):  # noqa: D103
         score = np.where(on_side & ~np.isnan(full.candidates), full.min_ratio, -np.inf)
         rows = np.flatnonzero(blocked[:, col])
         np.testing.assert_array_equal(full.best_blocked[rows, col], np.argmax(score[rows], axis=1))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_boundary_kernel_gives_the_numpy_candidates_choices(seed, monkeypatch):
+    """band_search with the numba boundary kernel makes the same choices as with the numpy
+    reference candidates (``exact_boundary_candidates_numpy``) on many random encounters."""
+    from airspace_sim.avoidance import bands
+
+    rng = np.random.default_rng(100 + seed)
+    n, k = 150, 12
+    vo, r, v, valid = random_scene(rng, n, k, spread=15000.0)
+    mx = rng.uniform(0.0, np.pi, n)
+    radius = rng.uniform(2000.0, 4000.0, (n, k))
+    runs = []
+    for fn in (bands.exact_boundary_candidates, bands.exact_boundary_candidates_numpy):
+        monkeypatch.setattr(bands, "exact_boundary_candidates", fn)
+        for full, penalty in ((False, 0.0), (True, 0.0), (False, 0.1)):
+            runs.append(
+                band_search(vo, r, v, valid, mx, radius, 120.0, 0.1, RES, True, penalty, full=full)
+            )
+    for fast, ref in zip(runs[:3], runs[3:]):
+        # equal here; elsewhere numpy's SIMD sin/cos may differ from libm in the last bits
+        assert np.array_equal(np.isnan(fast.candidates), np.isnan(ref.candidates))
+        assert np.nanmax(np.abs(fast.candidates - ref.candidates)) <= 1e-12
+        assert np.all(np.abs(fast.heading_change - ref.heading_change) <= 1e-12)
+        assert np.array_equal(fast.conflict, ref.conflict)
+        assert np.array_equal(fast.first_clear, ref.first_clear)
+        assert np.array_equal(fast.best_blocked, ref.best_blocked)
+    assert runs[0].conflict.sum() > n // 4  # the scene exercises the search
+
+
+@pytest.mark.parametrize("left_penalty", [0.0, RES, 0.25, np.inf])
+def test_preferred_candidates_equal_the_lexsort_reference(left_penalty):
+    """The numba candidate sort gives the numpy lexsort's array bit for bit: ties in ``|ψ|``
+    (grid ±kΔ, repeated boundary roots, ±0), NaN and out-of-limit extras, infinite and NaN
+    limits."""
+    from airspace_sim.avoidance.bands import (
+        candidate_grid,
+        preferred_candidates,
+        sort_by_preference_numpy,
+    )
+
+    rng = np.random.default_rng(7)
+    n, e = 60, 40
+    mx = rng.uniform(0.0, np.pi, n)
+    mx[:3] = [0.0, np.inf, np.nan]
+    extra = rng.uniform(-np.pi, np.pi, (n, e))
+    extra[rng.random((n, e)) < 0.4] = np.nan
+    extra[:, :6] = rng.choice([0.0, -0.0, RES, -RES, 5 * RES, np.pi, -np.pi], (n, 6))
+    extra[:, 6] = -mx  # duplicates of the limits
+    extra[:, 7] = extra[:, 8] = rng.uniform(-1.0, 1.0, n)  # a repeated root
+    extra[:, 9] = np.nextafter(mx, np.inf)  # just outside ±max: dropped unless within 1e-12
+    extra[:, 10] = mx * (1 + 1e-11)
+    got = preferred_candidates(mx, RES, extra, left_penalty)
+    ref = sort_by_preference_numpy(candidate_grid(mx, RES, extra), left_penalty)
+    assert got.shape == ref.shape
+    assert np.array_equal(got, ref, equal_nan=True)
+    assert np.array_equal(np.signbit(got), np.signbit(ref))
+    assert np.isinf(got[1]).sum() >= 2  # ψ = ±inf are usable with an infinite limit
+    assert np.array_equal(
+        preferred_candidates(mx, RES, None, left_penalty),
+        sort_by_preference_numpy(candidate_grid(mx, RES), left_penalty),
+        equal_nan=True,
+    )

@@ -158,3 +158,72 @@ def test_vectorised_shapes():
             p, o = tangent_heading_change(vo[i, j], vi[i, j], b[i, j], R)
             assert o == ok[i, j]
             assert (np.isnan(p) and np.isnan(psi[i, j])) or p == psi[i, j]
+
+
+def _reference_roots(vo, r, vi, valid, radius, t):
+    """(N, K, 6) from the numpy functions: tangents side −1, side +1, range at ``t``."""
+    vo3 = vo[:, None, :]
+    out = np.concatenate(
+        [
+            tangent_heading_changes(vo3, vi, r, radius, -1.0),
+            tangent_heading_changes(vo3, vi, r, radius, 1.0),
+            range_at_time_heading_changes(vo3, vi, r, radius, np.full(r.shape[:-1], t)),
+        ],
+        axis=-1,
+    )
+    return np.where(valid[..., None], out, np.nan)
+
+
+def _assert_kernel_matches(vo, r, vi, valid, radius, t):
+    from airspace_sim.avoidance.heading import boundary_heading_changes
+
+    with np.errstate(all="ignore"):
+        ref = _reference_roots(vo, r, vi, valid, radius, t)
+    got = boundary_heading_changes(vo, r, vi, valid, radius, t)
+    # same roots exist; values equal up to the last bits of libm vs numpy's SIMD sin/cos
+    # (an angle at ±π may come out on either side of the wrap)
+    assert np.array_equal(np.isnan(got), np.isnan(ref))
+    ok = ~np.isnan(ref)
+    assert np.all(np.abs(wrap_angle(got[ok] - ref[ok])) <= 1e-12)
+    return got, ref
+
+
+def test_boundary_kernel_equals_numpy_random():
+    rng = np.random.default_rng(5)
+    n, k = 40, 25
+    vo = rotate(np.array([250.0, 0.0]), rng.uniform(-np.pi, np.pi, n))
+    r = rng.uniform(-20000.0, 20000.0, (n, k, 2))
+    r[:, :3] *= 0.05  # some intruders inside the radius
+    vi = rotate(
+        np.stack([rng.uniform(0.0, 500.0, (n, k)), np.zeros((n, k))], -1),
+        rng.uniform(-np.pi, np.pi, (n, k)),
+    )
+    valid = rng.random((n, k)) < 0.9
+    radius = rng.uniform(2000.0, 4000.0, (n, k))
+    got, ref = _assert_kernel_matches(vo, r, vi, valid, radius, 120.0)
+    assert np.isnan(got[~valid]).all()
+    assert (~np.isnan(got)).sum(axis=-1).max() >= 4  # both tangents and the range roots occur
+
+
+def test_boundary_kernel_equals_numpy_degenerate():
+    """Components from a small set (signed zeros, equal speeds, on-axis geometry): zero
+    relative velocity, coincident positions, intruders inside or on the radius, zero own
+    speed, roots at exactly ±π — and the sign of zero that decides atan2 there."""
+    rng = np.random.default_rng(6)
+    vals = np.array([0.0, -0.0, 250.0, -250.0, 800.0, -800.0, 3300.0, -3300.0, 1e-300])
+    n, k = 200, 30
+    vo = rng.choice(vals[:4], (n, 2))
+    vo[0] = 0.0  # no own speed
+    r = rng.choice(vals, (n, k, 2))
+    vi = rng.choice(vals[:4], (n, k, 2))
+    vi[:, :5] = vo[:, None, :]  # zero relative velocity
+    r[:, 5] = 0.0  # coincident
+    # ψ = ±π exactly: p = (−5800, ±0) behind, |p − 10·R(π)v_o| = 3300 at t = 10 s (a double root)
+    vo[1] = [250.0, 0.0]
+    r[1, 6], vi[1, 6] = [-5800.0, 0.0], [0.0, 0.0]
+    r[1, 7], vi[1, 7] = [-5800.0, -0.0], [0.0, -0.0]
+    valid = np.ones((n, k), bool)
+    got, ref = _assert_kernel_matches(vo, r, vi, valid, np.full((n, k), 3300.0), 10.0)
+    assert np.all(np.abs(np.abs(got[1, 6:8, 4:]) - np.pi) < 1e-12)
+    assert not np.any(got[:, :5, :4] == 0.0)  # ψ = 0 has no relative motion: no tangent ray
+    assert np.isnan(got[0]).all()  # no own speed: no heading change moves anything

@@ -28,6 +28,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from airspace_sim.avoidance.cpa import (
     best_blocked_search,
@@ -36,6 +37,7 @@ from airspace_sim.avoidance.cpa import (
     first_clear_search,
 )
 from airspace_sim.avoidance.heading import (
+    boundary_heading_changes,
     range_at_time_heading_changes,
     tangent_heading_changes,
     wrap_angle,
@@ -88,15 +90,21 @@ def first_clear_from_band(candidates, band):
     return out
 
 
+def _grid(max_heading_change, resolution):
+    """The grid ``k·resolution`` (G,) rad, ``|k| ≤ floor(max(max_heading_change)/resolution)``."""
+    mx = np.asarray(max_heading_change, dtype=float)
+    top = float(np.nanmax(mx)) if mx.size else 0.0
+    m = int(np.floor(top / resolution + 1e-9)) if np.isfinite(top) and top > 0 else 0
+    return np.arange(-m, m + 1, dtype=float) * resolution
+
+
 def candidate_grid(max_heading_change, resolution, extra=None):
     """Candidates ``(N, C)``: grid ``k·resolution``, the limits ``±max``, and ``extra`` (N, E).
 
     Entries outside ``±max_heading_change[n]`` (or NaN) are set to NaN.
     """
     mx = np.asarray(max_heading_change, dtype=float)
-    top = float(np.nanmax(mx)) if mx.size else 0.0
-    m = int(np.floor(top / resolution + 1e-9)) if np.isfinite(top) and top > 0 else 0
-    grid = np.arange(-m, m + 1, dtype=float) * resolution
+    grid = _grid(mx, resolution)
     parts = [np.broadcast_to(grid, (mx.shape[0], grid.size)), -mx[:, None], mx[:, None]]
     if extra is not None:
         parts.append(np.asarray(extra, dtype=float).reshape(mx.shape[0], -1))
@@ -105,12 +113,176 @@ def candidate_grid(max_heading_change, resolution, extra=None):
     return np.where(inside, cand, np.nan)
 
 
+def sort_by_preference_numpy(candidates, left_penalty=0.0):
+    """``candidates`` (N, C) rad sorted along each row by preference (the reference for
+    :func:`preferred_candidates`): ``|ψ|`` (``+ left_penalty`` for ``ψ > 0``; NaN ranks as
+    ``inf``), then right turn (``ψ ≤ 0``) first, then the original index."""
+    cand = np.asarray(candidates, dtype=float)
+    usable = ~np.isnan(cand)
+    mag = np.where(usable, np.abs(cand) + np.where(cand > 0, left_penalty, 0.0), np.inf)
+    idx = np.broadcast_to(np.arange(cand.shape[1]), cand.shape)
+    order = np.lexsort((idx, cand > 0, mag), axis=-1)
+    return np.take_along_axis(cand, order, axis=-1)
+
+
+def preferred_candidates(max_heading_change, resolution, extra, left_penalty=0.0):
+    """:func:`candidate_grid` sorted by :func:`sort_by_preference_numpy`'s order, (N, C) rad.
+
+    ``max_heading_change`` (N,) rad, ``resolution`` rad, ``extra`` None or (N, E) rad. One
+    numba pass per row (:func:`_preferred_kernel`): the same array.
+    """
+    mx = np.ascontiguousarray(max_heading_change, dtype=float)
+    grid = _grid(mx, resolution)
+    if extra is None:
+        extra = np.empty((mx.shape[0], 0))
+    extra = np.ascontiguousarray(np.asarray(extra, dtype=float).reshape(mx.shape[0], -1))
+    if not np.all(np.diff(grid) > 0):  # the kernel needs an increasing grid
+        return sort_by_preference_numpy(candidate_grid(mx, resolution, extra), left_penalty)
+    return _preferred_kernel(grid, mx, extra, float(left_penalty))
+
+
+@njit(cache=True, error_model="numpy")
+def _merge(av, am, al, ai, na, bv, bm, bl, bi, nb, ov, om, ol, oi, start):  # pragma: no cover
+    """Merge two runs sorted by the key ``(mag, left, index)`` into ``o*[start:]``."""
+    i = j = 0
+    o = start
+    while i < na or j < nb:
+        take_a = j >= nb or (
+            i < na
+            and (
+                am[i] < bm[j]
+                or (am[i] == bm[j] and (al[i] < bl[j] or (al[i] == bl[j] and ai[i] < bi[j])))
+            )
+        )
+        if take_a:
+            ov[o], om[o], ol[o], oi[o] = av[i], am[i], al[i], ai[i]
+            i += 1
+        else:
+            ov[o], om[o], ol[o], oi[o] = bv[j], bm[j], bl[j], bi[j]
+            j += 1
+        o += 1
+    return o
+
+
+@njit(cache=True, error_model="numpy")
+def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - compiled
+    """Rows of ``[grid (G,), −mx[n], mx[n], extra[n] (E,)]`` (NaN outside ``±mx[n]``), sorted.
+
+    The order is the lexsort key ``(mag, ψ > 0, index)``, ``mag = |ψ| (+ left_penalty)``.
+    The entries of finite ``mag`` form three runs already sorted by that key — the grid's
+    right turns by decreasing index, its left turns by increasing index (``grid`` increasing),
+    and the limits and extras after a stable sort of ``mag`` (listed right turns first,
+    each in index order) — which are merged. The ``inf`` and then NaN ``mag`` entries follow
+    in that listing order, which is where the lexsort puts them.
+    """
+    n_own, n_extra = extra.shape
+    n_grid = grid.size
+    n_cand = n_grid + 2 + n_extra
+    split = 0  # grid[:split] ≤ 0 (right turns or ahead), grid[split:] > 0
+    while split < n_grid and not grid[split] > 0.0:
+        split += 1
+    out = np.empty((n_own, n_cand))
+    row = np.empty(n_cand)
+    rv, rm, rl, ri = (
+        np.empty(n_cand),
+        np.empty(n_cand),
+        np.empty(n_cand, np.bool_),
+        np.empty(n_cand, np.int64),
+    )
+    lv, lm, ll, li = rv.copy(), rm.copy(), rl.copy(), ri.copy()
+    gv, gm, gl, gi = rv.copy(), rm.copy(), rl.copy(), ri.copy()
+    xv, xm, xl, xi = rv.copy(), rm.copy(), rl.copy(), ri.copy()
+    ov, om, ol, oi = rv.copy(), rm.copy(), rl.copy(), ri.copy()
+    tail = np.empty((4, n_cand))
+    nt = np.zeros(4, np.int64)  # tail counts: (inf, right), (inf, left), (NaN, right), ...
+    for n in range(n_own):
+        lim = mx[n] * (1 + 1e-12) + 1e-15
+        for j in range(n_cand):
+            if j < n_grid:
+                c = grid[j]
+            elif j == n_grid:
+                c = -mx[n]
+            elif j == n_grid + 1:
+                c = mx[n]
+            else:
+                c = extra[n, j - n_grid - 2]
+            row[j] = c if abs(c) <= lim else np.nan
+        nr = 0
+        for j in range(split - 1, -1, -1):
+            g = abs(row[j])
+            if g < np.inf:
+                rv[nr], rm[nr], rl[nr], ri[nr] = row[j], g, False, j
+                nr += 1
+        nl = 0
+        for j in range(split, n_grid):
+            g = abs(row[j]) + left_penalty
+            if g < np.inf:
+                lv[nl], lm[nl], ll[nl], li[nl] = row[j], g, True, j
+                nl += 1
+        ng = _merge(rv, rm, rl, ri, nr, lv, lm, ll, li, nl, gv, gm, gl, gi, 0)
+        # limits and extras of finite mag listed right turns first, then a stable insertion
+        # sort by mag (a few dozen per row); the rest into the inf / NaN tail lists
+        nx = nxl = 0
+        nt[:] = 0
+        for j in range(n_cand):
+            c = row[j]
+            left = c > 0.0
+            g = np.inf if np.isnan(c) else abs(c) + (left_penalty if left else 0.0)
+            if g < np.inf:
+                if j < n_grid:
+                    continue
+                if left:
+                    lv[nxl], lm[nxl], li[nxl] = c, g, j
+                    nxl += 1
+                else:
+                    xv[nx], xm[nx], xl[nx], xi[nx] = c, g, False, j
+                    nx += 1
+            else:
+                q = (0 if g == np.inf else 2) + (1 if left else 0)
+                tail[q, nt[q]] = c
+                nt[q] += 1
+        for i in range(nxl):
+            xv[nx], xm[nx], xl[nx], xi[nx] = lv[i], lm[i], True, li[i]
+            nx += 1
+        for i in range(1, nx):
+            v, g, lf, ix = xv[i], xm[i], xl[i], xi[i]
+            k = i - 1
+            while k >= 0 and xm[k] > g:
+                xv[k + 1], xm[k + 1], xl[k + 1], xi[k + 1] = xv[k], xm[k], xl[k], xi[k]
+                k -= 1
+            xv[k + 1], xm[k + 1], xl[k + 1], xi[k + 1] = v, g, lf, ix
+        m = _merge(gv, gm, gl, gi, ng, xv, xm, xl, xi, nx, ov, om, ol, oi, 0)
+        out[n, :m] = ov[:m]
+        for q in range(4):  # then mag = inf, then mag = NaN, right turns first
+            out[n, m : m + nt[q]] = tail[q, : nt[q]]
+            m += nt[q]
+    return out
+
+
 def exact_boundary_candidates(own_velocity, rel_position, rel_velocity, valid, radius, lookahead_s):
-    """Exact boundary heading changes of each intruder's clear set, ``(N, 6K)`` (NaN if none).
+    """Exact boundary heading changes of each intruder's clear set, ``(N, 6K)`` rad (NaN if none).
 
     Both tangents from :func:`~airspace_sim.avoidance.heading.tangent_heading_changes` (two
-    roots each) and the two roots of ``|r + T·v_rel(ψ)| = radius``.
+    roots each) and the two roots of ``|r + T·v_rel(ψ)| = radius``, intruder ``k`` in columns
+    ``6k … 6k+5``; invalid slots NaN. Own velocity (N, 2) m/s, relative position and velocity
+    (N, K, 2) m and m/s, valid (N, K), radius float or (N, K) m, ``lookahead_s`` s. One numba
+    pass (:func:`~airspace_sim.avoidance.heading.boundary_heading_changes`);
+    :func:`exact_boundary_candidates_numpy` is the reference.
     """
+    vo = np.ascontiguousarray(own_velocity, dtype=float)
+    r = np.ascontiguousarray(rel_position, dtype=float)
+    vi = np.ascontiguousarray(np.asarray(rel_velocity, dtype=float) + vo[:, None, :])
+    valid = np.ascontiguousarray(valid, dtype=bool)
+    radius = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, dtype=float), r.shape[:-1]))
+    out = boundary_heading_changes(vo, r, vi, valid, radius, float(lookahead_s))
+    return out.reshape(out.shape[0], -1)
+
+
+def exact_boundary_candidates_numpy(
+    own_velocity, rel_position, rel_velocity, valid, radius, lookahead_s
+):
+    """:func:`exact_boundary_candidates` from the numpy functions of
+    :mod:`~airspace_sim.avoidance.heading` (the reference for the kernel), ``(N, 6K)``."""
     vo = np.asarray(own_velocity, dtype=float)[:, None, :]
     r = np.asarray(rel_position, dtype=float)
     vi = np.asarray(rel_velocity, dtype=float) + vo
@@ -174,15 +346,10 @@ def band_search(
     extra = None
     if exact_candidates and r.shape[1] > 0:
         extra = exact_boundary_candidates(vo, r, v, valid, radius, lookahead_s)
-    cand = candidate_grid(mx, resolution, extra)
-    # sort by preference: |ψ| (+ left_penalty for left turns), then right turn (ψ ≤ 0)
+    # sorted by preference: |ψ| (+ left_penalty for left turns), then right turn (ψ ≤ 0)
     # first, then original index
+    cand = preferred_candidates(mx, resolution, extra, left_penalty)
     usable = ~np.isnan(cand)
-    mag = np.where(usable, np.abs(cand) + np.where(cand > 0, left_penalty, 0.0), np.inf)
-    idx = np.broadcast_to(np.arange(cand.shape[1]), cand.shape)
-    order = np.lexsort((idx, cand > 0, mag), axis=-1)
-    cand = np.take_along_axis(cand, order, axis=-1)
-    usable = np.take_along_axis(usable, order, axis=-1)
     rows = np.arange(n)
     safe = np.where(usable, cand, 0.0)
     ratio0 = cpa_min_ratio(vo, r, v, valid, np.zeros((n, 1)), radius, lookahead_s)[:, 0]

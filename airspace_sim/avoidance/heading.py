@@ -18,6 +18,7 @@ Angles are radians, CCW positive; ``ψ < 0`` is a right turn. Rotation
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from airspace_sim.avoidance.escape import escape_side, line_of_sight_angles
 from airspace_sim.geometry import rotate, wrap_angle
@@ -161,3 +162,94 @@ def _smallest(roots):
     r_best = np.take_along_axis(roots, best[..., None], -1)[..., 0]
     r_other = np.take_along_axis(roots, other[..., None], -1)[..., 0]
     return np.where(tie & (r_other < r_best), r_other, r_best)
+
+
+@njit(cache=True, error_model="numpy")
+def _wrap(x):  # pragma: no cover - compiled
+    """:func:`~airspace_sim.geometry.wrap_angle` of a scalar, rad: ``(x + π) % 2π − π`` with
+    numpy's float remainder (``fmod``, then the divisor's sign), so the same bits."""
+    m = np.fmod(x + np.pi, 2.0 * np.pi)
+    if m < 0.0:
+        m += 2.0 * np.pi
+    elif m == 0.0:
+        m = 0.0  # numpy gives +0 (the divisor's sign), fmod may give −0
+    return m - np.pi
+
+
+@njit(cache=True, error_model="numpy")
+def _sum2(x0, x1):  # pragma: no cover - compiled
+    """``np.sum`` of two numbers: ``x0 + x1`` except that ``−0 + −0`` is ``+0`` (the reduction
+    starts from ``0.0``); the sign of a zero matters to ``atan2``."""
+    return (0.0 + x0) + x1
+
+
+@njit(cache=True, error_model="numpy")
+def _cos_sin_roots(a, b, c):  # pragma: no cover - compiled
+    """Scalar :func:`_solve_cos_sin`: the two wrapped roots, rad, NaN where none."""
+    amp = np.hypot(a, b)
+    ratio = c / amp
+    phi = np.arctan2(b, a)
+    if not (abs(ratio) <= 1.0):
+        return np.nan, np.nan
+    half = np.arccos(min(max(ratio, -1.0), 1.0))
+    return _wrap(phi - half), _wrap(phi + half)
+
+
+@njit(cache=True, error_model="numpy")
+def boundary_heading_changes(vo, r, vi, valid, radius, lookahead_s):  # pragma: no cover
+    """Per (ownship, intruder) pair the six boundary roots, ``(N, K, 6)`` rad, NaN if none.
+
+    ``vo`` (N, 2) own velocity and ``vi`` (N, K, 2) intruder velocity, m/s (world frame);
+    ``r`` (N, K, 2) intruder minus ownship, m; ``valid`` (N, K) bool (invalid pairs: NaN);
+    ``radius`` (N, K) m; ``lookahead_s`` T in s. Columns: the two roots of
+    :func:`tangent_heading_changes` with ``side = −1``, the two with ``side = +1``, the two of
+    :func:`range_at_time_heading_changes` at ``t = T``. One fused loop with the numpy
+    functions' operations in their order (they are the reference), so the same numbers up to
+    the last bit of the transcendental functions.
+    """
+    n_own, n_int = valid.shape
+    out = np.full((n_own, n_int, 6), np.nan)
+    for n in range(n_own):
+        vox, voy = vo[n, 0], vo[n, 1]
+        sv = np.hypot(vox, voy)
+        vv = _sum2(vox * vox, voy * voy)
+        for k in range(n_int):
+            if not valid[n, k]:
+                continue
+            bx, by = r[n, k, 0], r[n, k, 1]
+            vix, viy = vi[n, k, 0], vi[n, k, 1]
+            rad = radius[n, k]
+            # tangent_direction: line of sight rotated by ±β
+            dist = np.hypot(bx, by)
+            ratio = rad / (dist if dist > 0 else 1.0) if dist > rad else 1.0
+            beta = np.arcsin(min(max(ratio, 0.0), 1.0))
+            if dist > 0:
+                lx, ly = -bx / dist, -by / dist
+            else:
+                lx, ly = -1.0, 0.0
+            scale = sv + np.hypot(vix, viy)
+            for s in range(2):
+                ang = (2.0 * s - 1.0) * beta
+                cs, sn = np.cos(ang), np.sin(ang)
+                ux = cs * lx - sn * ly
+                uy = sn * lx + cs * ly
+                nx, ny = -uy, ux
+                a = _sum2(nx * vox, ny * voy)
+                b = _sum2(nx * -voy, ny * vox)
+                c = _sum2(nx * vix, ny * viy)
+                roots = _cos_sin_roots(a, b, c)
+                for j in range(2):
+                    psi = roots[j]
+                    cp, sp = np.cos(psi), np.sin(psi)
+                    wx = vix - (cp * vox - sp * voy)
+                    wy = viy - (sp * vox + cp * voy)
+                    if _sum2(wx * ux, wy * uy) > 1e-12 * scale:  # λ > 0: the tangent ray
+                        out[n, k, 2 * s + j] = psi
+            # range_at_time_heading_changes at t = T
+            t = lookahead_s
+            px, py = bx + t * vix, by + t * viy
+            a = _sum2(px * vox, py * voy)
+            b = _sum2(px * -voy, py * vox)
+            c = (_sum2(px * px, py * py) + t * t * vv - rad * rad) / (2.0 * t)
+            out[n, k, 4], out[n, k, 5] = _cos_sin_roots(a, b, c)
+    return out
