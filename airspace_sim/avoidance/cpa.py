@@ -91,6 +91,22 @@ def cpa_min_ratio_numpy(
     return np.sqrt(v2.min(axis=-1))
 
 
+@njit(inline="always", error_model="numpy")
+def _pair_ratio2(vo, r, v, radius, n, k, rvx, rvy, lookahead_s):  # pragma: no cover
+    """(CPA distance over [0, T] / radius)² of ownship ``n`` (velocity turned to
+    ``(rvx, rvy)``) and intruder ``k``: the one formula every kernel here uses, so that
+    they all give the same bits as :func:`cpa_min_ratio_numpy`."""
+    rx, ry = r[n, k, 0], r[n, k, 1]
+    vx = (v[n, k, 0] + vo[n, 0]) - rvx
+    vy = (v[n, k, 1] + vo[n, 1]) - rvy
+    dot = vx * rx + vy * ry
+    v2 = vx * vx + vy * vy
+    t = -dot / max(v2, 1e-300)
+    t = min(max(t, 0.0), lookahead_s)
+    d2 = (t * v2 + 2.0 * dot) * t + (rx * rx + ry * ry)
+    return max(d2, 0.0) * (1.0 / (radius[n, k] * radius[n, k]))
+
+
 @njit(cache=True, error_model="numpy")
 def _cpa_kernel(vo, r, v, valid, psi, radius, lookahead_s):  # pragma: no cover - compiled
     """Fused loop over ``(n, c, k)`` of :func:`cpa_min_ratio_numpy`'s formula, same operations."""
@@ -109,16 +125,7 @@ def _cpa_kernel(vo, r, v, valid, psi, radius, lookahead_s):  # pragma: no cover 
             for k in range(n_int):
                 if not valid[n, k]:
                     continue
-                rx, ry = r[n, k, 0], r[n, k, 1]
-                vx = (v[n, k, 0] + vo[n, 0]) - rvx
-                vy = (v[n, k, 1] + vo[n, 1]) - rvy
-                dot = vx * rx + vy * ry
-                v2 = vx * vx + vy * vy
-                t = -dot / max(v2, 1e-300)
-                t = min(max(t, 0.0), lookahead_s)
-                d2 = (t * v2 + 2.0 * dot) * t + (rx * rx + ry * ry)
-                ratio2 = max(d2, 0.0) * (1.0 / (radius[n, k] * radius[n, k]))
-                best = min(best, ratio2)
+                best = min(best, _pair_ratio2(vo, r, v, radius, n, k, rvx, rvy, lookahead_s))
             out[n, c] = np.sqrt(best)
     return out
 
@@ -162,15 +169,7 @@ def first_clear_search(
                 k = blocker if j < 0 else j
                 if k < 0 or (j >= 0 and k == blocker) or not valid[n, k]:
                     continue
-                rx, ry = r[n, k, 0], r[n, k, 1]
-                vx = (v[n, k, 0] + vo[n, 0]) - rvx
-                vy = (v[n, k, 1] + vo[n, 1]) - rvy
-                dot = vx * rx + vy * ry
-                v2 = vx * vx + vy * vy
-                t = -dot / max(v2, 1e-300)
-                t = min(max(t, 0.0), lookahead_s)
-                d2 = (t * v2 + 2.0 * dot) * t + (rx * rx + ry * ry)
-                ratio2 = max(d2, 0.0) * (1.0 / (radius[n, k] * radius[n, k]))
+                ratio2 = _pair_ratio2(vo, r, v, radius, n, k, rvx, rvy, lookahead_s)
                 if not (np.sqrt(ratio2) >= threshold):
                     clear = False
                     blocker = k
@@ -215,15 +214,7 @@ def best_blocked_search(
                 k = blocker if j < 0 else j
                 if k < 0 or (j >= 0 and k == blocker) or not valid[n, k]:
                     continue
-                rx, ry = r[n, k, 0], r[n, k, 1]
-                vx = (v[n, k, 0] + vo[n, 0]) - rvx
-                vy = (v[n, k, 1] + vo[n, 1]) - rvy
-                dot = vx * rx + vy * ry
-                v2 = vx * vx + vy * vy
-                t = -dot / max(v2, 1e-300)
-                t = min(max(t, 0.0), lookahead_s)
-                d2 = (t * v2 + 2.0 * dot) * t + (rx * rx + ry * ry)
-                q = np.sqrt(max(d2, 0.0) * (1.0 / (radius[n, k] * radius[n, k])))
+                q = np.sqrt(_pair_ratio2(vo, r, v, radius, n, k, rvx, rvy, lookahead_s))
                 if q < m:
                     m = q
                     arg = k

@@ -245,7 +245,9 @@ def _screen_kernel(
 ):  # pragma: no cover - compiled
     """Arrays of :func:`screen`: ``(keep_rows (n_own,) bool, rows (n, K'), rel_position,
     rel_velocity (n, K', 2), valid (n, K'))`` for the n kept rows. The CPA ratio at ψ = 0
-    is :func:`~airspace_sim.avoidance.cpa._cpa_kernel`'s arithmetic with cos 0 = 1, sin 0 = 0.
+    is :func:`~airspace_sim.avoidance.cpa._pair_ratio2`'s arithmetic with cos 0 = 1, sin 0 = 0,
+    written out here rather than called: numba's on-disk cache of this kernel would not
+    notice an edit of a helper in another module (tests/test_control.py checks the bits).
     """
     n_own, K = valid.shape
     keep_rows = np.zeros(n_own, dtype=np.bool_)
