@@ -36,7 +36,7 @@ from airspace_sim.env import rewards as rw
 from airspace_sim.env import spaces as sp
 from airspace_sim.errors import UserError
 from airspace_sim.world.autopilots import RouteAutopilot
-from airspace_sim.world.snapshot import live_tracks, lookahead_s
+from airspace_sim.world.snapshot import live_tracks
 
 RENDER_FPS = 10
 
@@ -188,7 +188,7 @@ class AirspaceParallelEnv(ParallelEnv):
             n_modes=w.tracks.n_modes,
             sensor_range=w.sensor_range,
             r_safe=w.r_safe,
-            lookahead=lookahead_s(w),
+            lookahead=float(w.lookahead),
         )
         # spaces are built once: observation_space(a) returns the same object every call
         self.observation_spaces = {a: self.observation_layout.space() for a in self.possible_agents}

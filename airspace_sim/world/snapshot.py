@@ -202,12 +202,6 @@ def live_tracks(world) -> Tracks:
     return Tracks(v.owner, v.intruder, v.x, v.P, v.mu, v.misses, v.age)
 
 
-def lookahead_s(world) -> float:
-    """The resolver look-ahead of ``world``, s (the one value the snapshot, the env's
-    observation scales and the resolver share)."""
-    return float(world.lookahead)
-
-
 def _pairs(i, j) -> np.ndarray:
     return np.stack([np.asarray(i, np.int64), np.asarray(j, np.int64)], axis=1).reshape(-1, 2)
 
@@ -218,7 +212,7 @@ def snapshot(world, prediction_points: int = PREDICTION_POINTS) -> Snapshot:
     from airspace_sim.world.bodies import LOS, NMAC
 
     tracks = live_tracks(world).copy()
-    look = lookahead_s(world)
+    look = float(world.lookahead)
     S = int(prediction_points)
     times = look * np.arange(1, S + 1) / S
     return Snapshot(

@@ -135,7 +135,6 @@ class World:
         )
         self.trackers_on = self.controlled | self.avoid  # ownships that track intruders
         self.policy = AvoidancePolicy(sc, dt, self.avoid & ~self.controlled, self.trackers_on)
-        self.lookahead = self.policy.lookahead_s
         self.metrics_acc = WorldMetrics(n, self.r_safe, self.nmac_distance, dt)
         self.airspace = Airspace(self.positions, self.r_safe, self.nmac_distance, self.sensor_range)
         self.in_los = np.zeros(n, dtype=bool)
@@ -152,6 +151,11 @@ class World:
     def advice(self) -> np.ndarray:
         """(N,) rad: the CDA policy's heading change for the coming step."""
         return self.policy.advice
+
+    @property
+    def lookahead(self) -> float:
+        """s: the resolver's look-ahead (the CDA policy's; the one value every observer uses)."""
+        return self.policy.lookahead_s
 
     @property
     def conflict(self) -> np.ndarray:
