@@ -4,6 +4,7 @@ Example::
 
     airspace-sim encounters --runs 10000 --workers 2 --resolver none,seed,bands \\
         --frame relative --out out/relative.parquet --seed 0
+    airspace-sim encounters --runs 100000 --backend ray --address ray://head:10001
 
 One row per (encounter, resolver) goes to the parquet file; a summary table per resolver is
 printed. Rerunning the same command resumes: finished encounters are skipped.
@@ -22,6 +23,19 @@ def add_arguments(parser) -> None:
     )
     parser.add_argument(
         "--workers", type=int, default=1, help="local worker processes K (default 1)"
+    )
+    parser.add_argument(
+        "--backend",
+        default="local",
+        choices=["local", "ray"],
+        help="local worker processes, or Ray tasks (pip install 'airspace-sim[ray]') "
+        "(default local)",
+    )
+    parser.add_argument(
+        "--address",
+        default=None,
+        help="Ray cluster address (with --backend ray; default: start a local Ray with "
+        "--workers CPUs)",
     )
     parser.add_argument(
         "--resolver",
@@ -75,6 +89,14 @@ def run(args) -> int:
         raise UserError(
             f"--max-turn-rate: must be a positive number of deg/s, got {args.max_turn_rate!r}"
         )
+    if args.summary_md:  # outputs checked before the work
+        from pathlib import Path
+
+        parent = Path(args.summary_md).resolve().parent
+        if not parent.is_dir():
+            raise UserError(f"--summary-md: folder {parent} does not exist")
+    if args.address and args.backend != "ray":
+        raise UserError("--address: only with --backend ray")
     cfg = EncounterConfig(
         own_motion=args.own_motion, max_turn_rate=math.radians(args.max_turn_rate)
     )
@@ -89,6 +111,8 @@ def run(args) -> int:
         chunk_size=args.chunk_size,
         cfg=cfg,
         progress=not args.no_progress,
+        backend=args.backend,
+        address=args.address,
     )
     wall = time.perf_counter() - t0
     rows = summarize(table)

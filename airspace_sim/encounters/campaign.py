@@ -8,14 +8,15 @@ Reproducibility: encounter ``i`` draws every random number from
 the batched IMM treats its rows independently, so an encounter's row is the same whatever
 chunk, batch, worker or order runs it: results are identical for any ``--workers``.
 
-Resume: work is split into units (one resolver, up to ``chunk_size`` encounters); each
-finished unit is written as ``<out>.parts/part-<resolver>-<first>-<last>.parquet`` through a
-temporary file and an atomic rename, by the parent process only. A restarted run reads the
-parts, skips every (resolver, encounter) already present and runs the rest; the final
-``<out>`` is assembled from the parts (duplicates dropped, sorted by resolver then
-encounter) and also written atomically. ``<out>.parts/manifest.json`` records the seed,
-frame and configuration: resuming with different ones is refused (a UserError), since the
-rows would not be comparable.
+Running, resuming and the files on disk are the shared run engine's
+(:mod:`airspace_sim.experiments`): work is split into units (one resolver, up to
+``chunk_size`` encounters), run on a backend (local processes or Ray), and each finished unit
+is written atomically as ``<out>.parts/part-<resolver>-<first>-<last>.parquet``. The run key
+is (resolver, encounter): a restarted run skips every key already saved, a retried task never
+adds a row twice, and the final ``<out>`` is rebuilt from the parts sorted by resolver, then
+encounter. ``<out>.parts/manifest.json`` records the seed, frame and configuration:
+resuming with different ones is refused (a UserError), since the rows would not be
+comparable. Damaged state files are repaired or named (:mod:`airspace_sim.experiments.store`).
 
 The pseudo-resolver ``"oracle"`` asks, with perfect knowledge of the intruder's future,
 whether any manoeuvre of an open-loop family within the limits avoids loss of separation
@@ -27,12 +28,7 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import sys
-import warnings
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import asdict
-from pathlib import Path
 
 import numpy as np
 
@@ -133,14 +129,6 @@ def _table(cols: dict):
     return pa.table(cols, schema=_schema())
 
 
-def _write_atomic(table, path: Path) -> None:
-    import pyarrow.parquet as pq
-
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    pq.write_table(table, tmp)
-    os.replace(tmp, path)
-
-
 def _check_resolvers(resolvers: list[str]) -> None:
     from airspace_sim import registry
 
@@ -155,16 +143,6 @@ def _check_resolvers(resolvers: list[str]) -> None:
 
 def _manifest(seed: int, frame: str, cfg: EncounterConfig) -> dict:
     return {"seed": int(seed), "frame": frame, "config": json.loads(json.dumps(asdict(cfg)))}
-
-
-def _read_parts(parts: Path):
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    files = sorted(parts.glob("part-*.parquet"))
-    if not files:
-        return _schema().empty_table()
-    return pa.concat_tables([pq.read_table(f).cast(_schema()) for f in files])
 
 
 def plan_units(
@@ -182,8 +160,10 @@ def plan_units(
     return units
 
 
-def _safe(name: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_" else "_" for c in name)
+def _order(runs: int, resolvers) -> dict:
+    """Run key (resolver, encounter) -> row position: sorted by resolver, then encounter."""
+    keys = sorted((r, i) for r in resolvers for i in range(int(runs)))
+    return {k: j for j, k in enumerate(keys)}
 
 
 def run_campaign(
@@ -196,6 +176,8 @@ def run_campaign(
     chunk_size: int = 100,
     cfg: EncounterConfig | None = None,
     progress: bool = True,
+    backend: str = "local",
+    address: str | None = None,
 ):
     """Run (or resume) a campaign; write ``out`` (parquet) and return it as a pyarrow Table.
 
@@ -206,11 +188,15 @@ def run_campaign(
     resolvers : resolver names (registry names, or ``"oracle"``).
     frame : ``"relative"`` (the paper's) or ``"world"``.
     seed : campaign seed.
-    workers : K local worker processes (1 = in this process).
+    workers : K local worker processes (1 = in this process), or the CPUs of a local Ray.
     chunk_size : encounters per unit of work (vectorised together).
     cfg : :class:`EncounterConfig` (default: the paper's setting).
     progress : show a tqdm progress bar on stderr.
+    backend : ``"local"`` or ``"ray"`` (:mod:`airspace_sim.experiments.backends`).
+    address : Ray cluster address (``backend="ray"``); default: start a local Ray.
     """
+    from airspace_sim.experiments import PartStore, Unit, execute, make_backend
+
     if isinstance(resolvers, str):
         resolvers = [r.strip() for r in resolvers.split(",") if r.strip()]
     resolvers = list(resolvers)
@@ -220,110 +206,30 @@ def run_campaign(
         raise UserError(f"--workers: must be a positive integer, got {workers!r}")
     if not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1:
         raise UserError(f"--chunk-size: must be a positive integer, got {chunk_size!r}")
+    if not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**63:
+        raise UserError(f"--seed: must be an integer in [0, 2**63), got {seed!r}")
     if frame not in FRAMES:
         raise UserError(f"--frame: must be one of {', '.join(FRAMES)}, got {frame!r}")
     _check_resolvers(resolvers)
     cfg = cfg or EncounterConfig()
-    out = Path(out)
-    if out.exists() and out.is_dir():
-        raise UserError(f"--out: {out} is a directory, expected a .parquet file path")
-    parts = out.with_name(out.name + ".parts")
-    try:
-        parts.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise UserError(f"--out: cannot create {parts}: {exc.strerror}") from None
-    manifest = _manifest(seed, frame, cfg)
-    mpath = parts / "manifest.json"
-    if mpath.exists():
-        old = json.loads(mpath.read_text())
-        if old != manifest:
-            diff = [k for k in manifest if old.get(k) != manifest[k]]
-            raise UserError(
-                f"{parts}: made with a different {', '.join(diff)}; use another --out or delete it"
-            )
-    else:
-        mpath.write_text(json.dumps(manifest, indent=1, sort_keys=True))
-
-    existing = _read_parts(parts)
-    done = set(
-        zip(existing.column("resolver").to_pylist(), existing.column("encounter").to_pylist())
-    )
-    units = plan_units(done, int(runs), resolvers, int(chunk_size))
+    store = PartStore(out, ("resolver", "encounter"), _manifest(seed, frame, cfg))
+    done = store.open()
     config = asdict(cfg)
-    total = sum(len(ix) for _, ix in units)
-
-    from tqdm import tqdm
-
-    bar = tqdm(
-        total=total,
+    units = [
+        Unit(f"{r}-{ix[0]:07d}-{ix[-1]:07d}", len(ix), (frame, r, int(seed), ix, config))
+        for r, ix in plan_units(done, int(runs), resolvers, int(chunk_size))
+    ]
+    execute(
+        store,
+        units,
+        run_unit,
+        make_backend(backend, int(workers), address),
+        _table,
         desc=f"encounters ({frame})",
         unit="enc",
-        disable=not progress or total == 0,
-        file=sys.stderr,
-        smoothing=0.1,
+        progress=progress,
     )
-
-    def save(resolver, ix, cols):
-        name = f"part-{_safe(resolver)}-{ix[0]:07d}-{ix[-1]:07d}.parquet"
-        _write_atomic(_table(cols), parts / name)
-        bar.update(len(ix))
-
-    try:
-        if workers == 1 or len(units) <= 1:
-            for r, ix in units:
-                save(r, ix, run_unit(frame, r, seed, ix, config))
-        else:
-            import multiprocessing as mp
-
-            # one BLAS/numba thread per worker: the workers are the parallelism
-            for var in (
-                "OMP_NUM_THREADS",
-                "OPENBLAS_NUM_THREADS",
-                "MKL_NUM_THREADS",
-                "NUMBA_NUM_THREADS",
-            ):
-                os.environ.setdefault(var, "1")
-            with ProcessPoolExecutor(
-                max_workers=int(workers), mp_context=mp.get_context("spawn")
-            ) as ex:
-                pending = {
-                    ex.submit(run_unit, frame, r, seed, ix, config): (r, ix) for r, ix in units
-                }
-                while pending:
-                    finished, _ = wait(pending, return_when=FIRST_COMPLETED)
-                    for f in finished:
-                        r, ix = pending.pop(f)
-                        save(r, ix, f.result())
-    finally:
-        bar.close()
-    return assemble(out, runs, resolvers)
-
-
-def assemble(out, runs: int, resolvers):
-    """Build ``out`` from its parts: requested resolvers, encounters < runs, no duplicates,
-    sorted by (resolver, encounter). Returns the table."""
-    import pyarrow as pa
-    import pyarrow.compute as pc
-
-    out = Path(out)
-    parts = out.with_name(out.name + ".parts")
-    t = _read_parts(parts)
-    mask = pc.and_(
-        pc.is_in(t.column("resolver"), value_set=pa.array(list(resolvers))),
-        pc.less(t.column("encounter"), runs),
-    )
-    t = t.filter(mask)
-    keys = list(zip(t.column("resolver").to_pylist(), t.column("encounter").to_pylist()))
-    if len(set(keys)) != len(keys):
-        seen, keep = set(), []
-        for _j, k in enumerate(keys):
-            keep.append(k not in seen)
-            seen.add(k)
-        warnings.warn(f"{parts}: {len(keys) - len(seen)} duplicate rows dropped", stacklevel=2)
-        t = t.filter(pa.array(keep))
-    t = t.sort_by([("resolver", "ascending"), ("encounter", "ascending")])
-    _write_atomic(t, out)
-    return t
+    return store.assemble(_order(runs, resolvers), _schema())
 
 
 # ----------------------------------------------------------------------------- summary
