@@ -90,6 +90,10 @@ def test_world_campaign_rows_and_summary(tmp_path):
         (["--runs", "0"], "--runs"),
         (["--workers", "0"], "--workers"),
         (["--frame", "sideways"], "--frame"),
+        (["--seed", "-1"], "--seed"),
+        (["--seed", str(2**70)], "--seed"),
+        (["--summary-md", "/nonexistent/folder/s.md"], "--summary-md"),
+        (["--address", "127.0.0.1:6379"], "--address: only with --backend ray"),
     ],
 )
 def test_bad_cli_input_is_one_line_exit_2(tmp_path, capsys, args, needle):

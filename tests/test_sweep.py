@@ -222,3 +222,15 @@ def test_bad_cli_input_is_one_line_exit_2(tmp_path, capsys, args, needle):
     assert code == 2, err
     assert needle in err and len(err.strip().splitlines()) == 1, err
     assert not out.exists()
+
+
+def test_ray_backend_without_ray_says_what_to_install(monkeypatch):
+    import sys
+
+    from airspace_sim.experiments import make_backend
+
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray -> ImportError
+    with pytest.raises(UserError, match=r"pip install 'airspace-sim\[ray\]'"):
+        make_backend("ray", 2)
+    with pytest.raises(UserError, match="--backend"):
+        make_backend("dask", 2)
