@@ -14,21 +14,13 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
+from _tables import pids_where, same_rows
 
 from airspace_sim.encounters.campaign import run_campaign
 from airspace_sim.errors import UserError
 from airspace_sim.experiments.sweep import run_sweep
 
 RUNS, CHUNK, RES = 8, 2, "seed"
-
-
-def same(a, b):
-    assert a.schema == b.schema
-    da, db = a.to_pydict(), b.to_pydict()
-    for k in da:
-        for x, y in zip(da[k], db[k], strict=True):
-            assert x == y or (x != x and y != y), (k, x, y)
-    return True
 
 
 def campaign(out, **kw):
@@ -48,17 +40,8 @@ def _copy(pristine, tmp_path) -> Path:
 
 
 def _children(pid: int) -> list[int]:
-    """Pids whose parent is ``pid`` (from /proc)."""
-    out = []
-    for d in Path("/proc").iterdir():
-        if d.name.isdigit():
-            try:
-                stat = (d / "stat").read_text()
-            except OSError:
-                continue
-            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
-                out.append(int(d.name))
-    return out
+    """Pids whose parent is ``pid``."""
+    return pids_where(lambda stat, cmd: int(stat.rsplit(")", 1)[1].split()[1]) == pid)
 
 
 def _alive(pid: int) -> bool:
@@ -104,7 +87,7 @@ def test_killed_parent_leaves_no_workers_and_resumes(tmp_path, pristine, sig):
     saved = {p.name: p.read_bytes() for p in parts.glob("part-*.parquet")}
     assert saved
     t = run_campaign(out, RUNS, RES, chunk_size=1, progress=False)
-    assert same(t, pristine[0])
+    assert same_rows(t, pristine[0])
     for name, data in saved.items():  # nothing computed was lost or run again
         assert (parts / name).read_bytes() == data
 
@@ -122,7 +105,7 @@ def test_killed_sweep_resumes_to_the_same_rows(tmp_path):
     proc.wait(timeout=30)
     n = len(list(parts.glob("part-*.parquet")))
     assert n >= 1
-    assert same(run_sweep("head_on", grid, "0-2", out, steps=60, progress=False), ref)
+    assert same_rows(run_sweep("head_on", grid, "0-2", out, steps=60, progress=False), ref)
 
 
 # ------------------------------------------------------------------ full disk
@@ -154,7 +137,7 @@ def test_full_disk_mocked_write_stops_clearly_and_resumes(tmp_path, pristine, mo
     assert json.loads((parts / "manifest.json").read_text())["seed"] == 0
     assert not list(parts.glob(".*")), "a temporary file was left behind"
     assert len(list(parts.glob("part-*.parquet"))) == 1
-    assert same(campaign(out), pristine[0])
+    assert same_rows(campaign(out), pristine[0])
 
 
 def _mount_tmpfs(path: Path, size: str) -> bool:
@@ -181,7 +164,7 @@ def test_full_disk_real_tmpfs(tmp_path, pristine):
         assert not list(parts.glob(".*"))
         saved = {p.name: p.read_bytes() for p in parts.glob("part-*.parquet")}
         subprocess.run(["mount", "-o", "remount,size=4m", str(mnt)], check=True)
-        assert same(campaign(out), pristine[0])
+        assert same_rows(campaign(out), pristine[0])
         for name, data in saved.items():
             assert (parts / name).read_bytes() == data
     finally:
@@ -216,8 +199,8 @@ def test_truncated_state_files_are_repaired(tmp_path, pristine, keep):
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             t = campaign(out)
-        assert same(t, pristine[0]), name
-        assert same(pq.read_table(out), pristine[0]), name
+        assert same_rows(t, pristine[0]), name
+        assert same_rows(pq.read_table(out), pristine[0]), name
         for p, b in others.items():  # intact parts kept as they were: nothing recomputed
             assert p.read_bytes() == b, (name, p)
         text = " ".join(str(w.message) for w in caught)

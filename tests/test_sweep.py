@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
+from _tables import same_rows
 from scipy import stats
 
 from airspace_sim import cli
@@ -24,16 +25,6 @@ from airspace_sim.world import World
 STEPS = 40
 GRID = ["resolver.kind=bands,none", "sensor.sigma=30,80.5"]
 SET = ["duration=60"]
-
-
-def same(a, b):
-    """Tables equal value by value (NaN equal to NaN), same schema and row order."""
-    assert a.schema == b.schema, (a.schema, b.schema)
-    da, db = a.to_pydict(), b.to_pydict()
-    for k in da:
-        for x, y in zip(da[k], db[k], strict=True):
-            assert x == y or (x != x and y != y), (k, x, y)
-    return True
 
 
 @pytest.fixture(scope="module")
@@ -114,8 +105,8 @@ def test_two_workers_and_resume_give_the_same_rows(tmp_path, reference):
     two = run_sweep(
         "head_on", GRID, "0-2", tmp_path / "k2.parquet", SET, steps=STEPS, workers=2, progress=False
     )
-    assert same(two, reference)
-    assert same(pq.read_table(tmp_path / "k2.parquet"), reference)
+    assert same_rows(two, reference)
+    assert same_rows(pq.read_table(tmp_path / "k2.parquet"), reference)
     # an interrupted sweep (fewer seeds, one resolver) resumed with the full grid
     out = tmp_path / "resumed.parquet"
     part = run_sweep(
@@ -131,7 +122,7 @@ def test_two_workers_and_resume_give_the_same_rows(tmp_path, reference):
     parts = out.with_name(out.name + ".parts")
     before = {p.name: p.stat().st_mtime_ns for p in parts.glob("part-*.parquet")}
     resumed = run_sweep("head_on", GRID, "0-2", out, SET, steps=STEPS, progress=False)
-    assert same(resumed, reference)
+    assert same_rows(resumed, reference)
     after = {p.name: p.stat().st_mtime_ns for p in parts.glob("part-*.parquet")}
     assert all(after[n] == t for n, t in before.items())  # finished runs not run again
     assert len(after) == 12

@@ -4,25 +4,17 @@ worker killed mid-run is retried without duplicate rows."""
 import os
 import threading
 import time
-from pathlib import Path
 
 import pytest
 
 ray = pytest.importorskip("ray")
 
+from _tables import pids_where, same_rows  # noqa: E402
+
 from airspace_sim.encounters.campaign import run_campaign  # noqa: E402
 from airspace_sim.experiments.sweep import run_sweep  # noqa: E402
 
 GRID = ["resolver.kind=bands,none"]
-
-
-def same(a, b):
-    assert a.schema == b.schema
-    da, db = a.to_pydict(), b.to_pydict()
-    for k in da:
-        for x, y in zip(da[k], db[k], strict=True):
-            assert x == y or (x != x and y != y), (k, x, y)
-    return True
 
 
 @pytest.fixture(scope="module")
@@ -37,7 +29,7 @@ def test_sweep_on_ray_equals_local(tmp_path, local_ray):
     local = run_sweep("head_on", GRID, "0-2", tmp_path / "l.parquet", **kw)
     remote = run_sweep("head_on", GRID, "0-2", tmp_path / "r.parquet", backend="ray", **kw)
     assert remote.num_rows == 6
-    assert same(local, remote)
+    assert same_rows(local, remote)
     assert (tmp_path / "l.parquet").read_bytes() == (tmp_path / "r.parquet").read_bytes()
 
 
@@ -45,21 +37,12 @@ def test_encounters_on_ray_equal_local(tmp_path, local_ray):
     kw = dict(chunk_size=3, progress=False)
     local = run_campaign(tmp_path / "l.parquet", 6, "seed,none", **kw)
     remote = run_campaign(tmp_path / "r.parquet", 6, "seed,none", backend="ray", **kw)
-    assert same(local, remote)
+    assert same_rows(local, remote)
 
 
 def _task_pids(name: str) -> list[int]:
     """Pids of Ray workers running task ``name`` (their title is ``ray::<name>``)."""
-    pids = []
-    for d in Path("/proc").iterdir():
-        if d.name.isdigit():
-            try:
-                cmd = (d / "cmdline").read_bytes()
-            except OSError:
-                continue
-            if cmd.startswith(f"ray::{name}".encode()):
-                pids.append(int(d.name))
-    return pids
+    return pids_where(lambda stat, cmd: cmd.startswith(f"ray::{name}".encode()))
 
 
 def test_lost_worker_is_retried_without_duplicates(tmp_path, local_ray):
@@ -83,4 +66,4 @@ def test_lost_worker_is_retried_without_duplicates(tmp_path, local_ray):
     assert killed, "no Ray worker was seen running a task"
     keys = list(zip(remote.column("settings").to_pylist(), remote.column("seed").to_pylist()))
     assert len(keys) == len(set(keys)) == 8
-    assert same(local, remote)
+    assert same_rows(local, remote)

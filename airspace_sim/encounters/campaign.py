@@ -342,13 +342,9 @@ def format_summary(rows: list[dict], markdown: bool = False) -> str:
                 f"{_fmt(r['false_det_rate_own_turn'], '.3f')} / {_fmt(r['false_det_rate_quiet'], '.3f')}"
             ]
         body.append(line)
-    if markdown:
-        out = ["| " + " | ".join(head) + " |", "|" + "|".join(" --- " for _ in head) + "|"]
-        out += ["| " + " | ".join(b) + " |" for b in body]
-        return "\n".join(out)
-    widths = [max(len(h), *(len(b[i]) for b in body)) for i, h in enumerate(head)]
-    fmt = "  ".join(f"{{:>{w}}}" for w in widths)
-    return "\n".join([fmt.format(*head)] + [fmt.format(*b) for b in body])
+    from airspace_sim.experiments.summary import format_table
+
+    return format_table(head, body, markdown)
 
 
 def oracle_breakdown(table) -> list[dict]:
@@ -406,9 +402,6 @@ def format_oracle_breakdown(rows: list[dict], markdown: bool = False) -> str:
         ]
         for r in rows
     ]
-    if markdown:
-        out = ["| " + " | ".join(head) + " |", "|" + "|".join(" --- " for _ in head) + "|"]
-        return "\n".join(out + ["| " + " | ".join(b) + " |" for b in body])
-    widths = [max(len(h), *(len(b[i]) for b in body)) for i, h in enumerate(head)]
-    fmt = "  ".join(f"{{:>{w}}}" for w in widths)
-    return "\n".join([fmt.format(*head)] + [fmt.format(*b) for b in body])
+    from airspace_sim.experiments.summary import format_table
+
+    return format_table(head, body, markdown)

@@ -81,6 +81,11 @@ def format_summary(rows: list[dict], keys: list[str], markdown: bool = False) ->
             half = r[m + "_ci"]
             line.append(_fmt(r[m]) + ("" if math.isnan(half) else f" ± {_fmt(half)}"))
         body.append(line)
+    return format_table(head, body, markdown)
+
+
+def format_table(head: list[str], body: list[list[str]], markdown: bool = False) -> str:
+    """Rows of cell texts under ``head``: right-aligned columns, or a markdown table."""
     if markdown:
         out = ["| " + " | ".join(head) + " |", "|" + "|".join(" --- " for _ in head) + "|"]
         return "\n".join(out + ["| " + " | ".join(b) + " |" for b in body])
