@@ -230,3 +230,33 @@ def test_part_from_other_settings_is_named(tmp_path, pristine):
     shutil.copy(src, dst)
     with pytest.raises(UserError, match="part-zz-from-elsewhere.parquet: made with other"):
         campaign(out)
+
+
+def test_lost_local_worker_is_replaced_without_duplicates(tmp_path, pristine):
+    """kill -9 of one worker: the pool breaks, a new one runs what had not come back."""
+    import threading
+
+    me = os.getpid()
+    killed = []
+
+    def kill_one():
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and not killed:
+            for pid in pids_where(
+                lambda stat, cmd: (
+                    int(stat.rsplit(")", 1)[1].split()[1]) == me and b"spawn_main" in cmd
+                )
+            ):
+                time.sleep(0.5)  # let it start a unit
+                os.kill(pid, signal.SIGKILL)
+                killed.append(pid)
+                return
+            time.sleep(0.02)
+
+    t = threading.Thread(target=kill_one)
+    t.start()
+    out = tmp_path / "w.parquet"
+    table = run_campaign(out, RUNS, RES, chunk_size=1, workers=2, progress=False)
+    t.join()
+    assert killed
+    assert same_rows(table, pristine[0])

@@ -44,12 +44,14 @@ def _watch_parent(parent_pid: int, period_s: float = 0.2) -> None:
 
 
 class LocalBackend:
-    """``workers`` local processes (1 = run in this process, no pool)."""
+    """``workers`` local processes (1 = run in this process, no pool). If a worker dies, the
+    units not finished run again on a new pool, up to ``max_retries`` times."""
 
     name = "local"
 
-    def __init__(self, workers: int = 1):
+    def __init__(self, workers: int = 1, max_retries: int = 2):
         self.workers = int(workers)
+        self.max_retries = int(max_retries)
         self._pool = None
         self._procs: list = []
 
@@ -64,20 +66,40 @@ class LocalBackend:
             for i, a in enumerate(args):
                 yield i, fn(*a)
             return
-        import multiprocessing as mp
-        from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+        from concurrent.futures.process import BrokenProcessPool
 
         for var in _THREAD_VARS:
             os.environ.setdefault(var, "1")
-        ctx = mp.get_context("spawn")
+        todo = dict(enumerate(args))
+        for attempt in range(self.max_retries + 1):
+            try:
+                for i, result in self._run_pool(fn, todo):
+                    del todo[i]
+                    yield i, result
+                return
+            except BrokenProcessPool:
+                # a worker died (killed, out of memory): the pool is unusable; a new one
+                # runs what has not come back, like Ray's task retries
+                self.close()
+                if attempt == self.max_retries:
+                    raise UserError(
+                        f"--workers: a worker process died {attempt + 1} times (killed, or out "
+                        "of memory?); the finished runs are saved: rerun to resume, or use "
+                        "fewer --workers"
+                    ) from None
+
+    def _run_pool(self, fn: Callable, todo: dict) -> Iterator[tuple[int, object]]:
+        import multiprocessing as mp
+        from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+
         before = set(mp.active_children())
         self._pool = ProcessPoolExecutor(
-            max_workers=min(self.workers, len(args)),
-            mp_context=ctx,
+            max_workers=min(self.workers, len(todo)),
+            mp_context=mp.get_context("spawn"),
             initializer=_watch_parent,
             initargs=(os.getpid(),),
         )
-        pending = {self._pool.submit(fn, *a): i for i, a in enumerate(args)}
+        pending = {self._pool.submit(fn, *a): i for i, a in todo.items()}
         self._procs = [p for p in mp.active_children() if p not in before]
         while pending:
             finished, _ = wait(pending, return_when=FIRST_COMPLETED)
