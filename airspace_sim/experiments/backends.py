@@ -163,6 +163,11 @@ class RayBackend:
             except (ConnectionError, RuntimeError, ValueError) as exc:
                 where = f"--address {address}" if address else "--backend ray"
                 first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+                cause = exc.__cause__  # e.g. an AuthenticationError behind "failed to connect"
+                if cause is not None and str(cause).strip():
+                    first += (
+                        f" ({type(cause).__name__}: {str(cause).strip().splitlines()[0][:160]})"
+                    )
                 raise UserError(f"{where}: cannot start or reach Ray: {first}") from None
             self._owned = True
         self.cpus = max(1, int(ray.cluster_resources().get("CPU", 1)))
