@@ -170,6 +170,13 @@ MAX_LOOKAHEAD_S = 3600.0
 MAX_STEPS = 10_000_000  #: duration / dt
 MAX_AIRCRAFT = 10_000  #: generated traffic (the track table grows as N²)
 MAX_PROBABILITY_SAMPLES = 1000
+MIN_DT_S = 1e-3  #: a shorter step only multiplies the work; 5e-324 overflowed duration / dt
+MAX_HEADING_DEG = 360.0  #: headings within ±360° (one turn either way)
+#: Estimated bytes of one track (IMM filter state of every mode plus bookkeeping; measured
+#: with tracemalloc on a ring whose aircraft all see each other, docs/bad-input.md).
+TRACK_BYTES = 5 * 1024
+#: Fraction of the machine's physical memory the worst-case track table may take.
+MEMORY_FRACTION = 0.5
 
 POSITIVE = _range(0, lo_open=True)
 NON_NEGATIVE = _range(0)
@@ -184,7 +191,7 @@ TURN_PREFERENCES = ("right", "nearest", "none")
 RANGES: dict[str, Callable[[Any], str | None]] = {
     "Scenario.name": NON_EMPTY,
     "Scenario.seed": _range(0, 2**63 - 1, integer=True),
-    "Scenario.dt": _range(0, 60.0, lo_open=True, unit="s"),
+    "Scenario.dt": _range(MIN_DT_S, 60.0, unit="s"),
     "Scenario.duration": _range(0, MAX_TIME_S, lo_open=True, unit="s"),
     "Scenario.model": _one_of(_preset_names),
     "Separation.r_safe": _range(0, 1e6, lo_open=True, unit="m"),
@@ -211,6 +218,7 @@ RANGES: dict[str, Callable[[Any], str | None]] = {
     "AircraftSpec.id": NON_EMPTY,
     "AircraftSpec.position": _points(MAX_COORDINATE_M),
     "AircraftSpec.waypoints": _points(MAX_COORDINATE_M),
+    "AircraftSpec.heading_deg": _range(-MAX_HEADING_DEG, MAX_HEADING_DEG, unit="deg"),
     "AircraftSpec.speed": _range(0, MAX_SPEED, lo_open=True, unit="m/s"),
     "AircraftSpec.autopilot": _one_of_registry("autopilot"),
     "AircraftSpec.max_turn_rate_deg": _range(0, 3600.0, unit="deg/s"),
@@ -417,6 +425,13 @@ def build_dataclass(cls, table: Any, path: str = ""):
 
 def check_scenario(sc: Scenario) -> None:
     """Checks that involve several fields; raises :class:`Invalid`."""
+    n = len(sc.aircraft) + sc.traffic.count
+    if n > MAX_AIRCRAFT:
+        raise Invalid(
+            "aircraft",
+            f"expected at most {MAX_AIRCRAFT} aircraft in all, got {len(sc.aircraft)} "
+            f"+ traffic.count {sc.traffic.count}",
+        )
     ids = [a.id for a in sc.aircraft]
     for i, aid in enumerate(ids):
         if aid in ids[:i]:
@@ -478,6 +493,46 @@ def check_scenario(sc: Scenario) -> None:
             "traffic.pattern",
             "expected an aircraft[0] (the ownship) for pattern 'encounter', got none",
         )
+    _check_memory(sc)
+
+
+def physical_memory_bytes() -> int | None:
+    """The machine's physical memory in bytes, or None where the OS does not say."""
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def track_table_bytes(sc: Scenario) -> int:
+    """Worst-case bytes of the scenario's track table: every tracking aircraft (avoiding or
+    an RL agent; generated traffic avoids unless the encounter pattern makes it
+    non-cooperative) holding a track on every other aircraft, :data:`TRACK_BYTES` each."""
+    n = len(sc.aircraft) + sc.traffic.count
+    trackers = sum(a.avoid or a.controlled for a in sc.aircraft)
+    if sc.traffic.pattern != "encounter":
+        trackers += sc.traffic.count
+    else:
+        trackers += sc.traffic.controlled
+    return trackers * max(n - 1, 0) * TRACK_BYTES
+
+
+def _check_memory(sc: Scenario) -> None:
+    """Refuse, before anything is allocated, a scenario whose worst-case track table would
+    not fit in :data:`MEMORY_FRACTION` of physical memory (``traffic.count = 10**9`` once
+    tried to allocate 15 GiB and died)."""
+    need = track_table_bytes(sc)
+    total = physical_memory_bytes()
+    if total is None or need <= MEMORY_FRACTION * total:
+        return
+    key = "traffic.count" if sc.traffic.count else "aircraft"
+    got = sc.traffic.count if sc.traffic.count else len(sc.aircraft)
+    raise Invalid(
+        key,
+        f"expected fewer aircraft: {len(sc.aircraft) + sc.traffic.count} aircraft may need "
+        f"{need / 2**30:.1f} GiB of tracks (every tracking aircraft tracking every other), "
+        f"more than {MEMORY_FRACTION:.0%} of this machine's {total / 2**30:.1f} GiB; got {got}",
+    )
 
 
 # --------------------------------------------------------------------------- part parameters
@@ -615,6 +670,8 @@ def parse_toml(text: str, source: str) -> dict:
     """Parse TOML; a syntax error becomes one line with file, line and column."""
     try:
         return tomllib.loads(text)
+    except RecursionError:
+        raise UserError(f"{source}: invalid TOML: arrays or tables nested too deeply") from None
     except tomllib.TOMLDecodeError as exc:
         msg = str(exc)
         m = _LINE_COL.search(msg)
@@ -634,7 +691,10 @@ def from_dict(
     """Validate a TOML-like dict (after applying ``overrides``) into a :class:`Scenario`."""
     import copy
 
-    data = copy.deepcopy(data)
+    try:
+        data = copy.deepcopy(data)
+    except RecursionError:  # a dict built in Python; a file's nesting is caught by parse_toml
+        raise UserError(f"{source}: values nested too deeply") from None
     set_paths = apply_overrides(data, overrides)
     if name is not None:
         data.setdefault("name", name)
@@ -668,4 +728,15 @@ def load(name_or_path: str | os.PathLike, overrides: Iterable[str] = ()) -> Scen
     except (OSError, UnicodeDecodeError) as exc:
         raise UserError(f"{source}: cannot read: {exc}") from None
     data = parse_toml(text, source)
-    return from_dict(data, source, overrides, name=path.stem)
+    if not data:
+        raise UserError(
+            f"{source}: empty scenario: expected [[aircraft]] tables or a [traffic] table"
+        )
+    sc = from_dict(data, source, overrides, name=path.stem)
+    # only here, not in from_dict: code builds aircraft-less scenarios as configurations
+    if not sc.aircraft and sc.traffic.count == 0:
+        raise UserError(
+            f"{source}: aircraft: expected at least one aircraft ([[aircraft]] tables or "
+            "[traffic] with a count), got none: nothing to simulate"
+        )
+    return sc
