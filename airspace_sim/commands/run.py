@@ -283,8 +283,31 @@ class Terminated(KeyboardInterrupt):
     exit_status = 128 + 15
 
 
-def _on_sigterm(signum, frame):
-    raise Terminated
+class _SigtermFlag:
+    """While active, SIGTERM only sets :attr:`received`; the run loop checks it between
+    steps. (Raising from the handler could land inside a library's ``__del__``, where the
+    exception is ignored and the signal lost.)"""
+
+    def __init__(self):
+        self.received = False
+        self._previous = None
+
+    def __enter__(self):
+        import signal
+        import threading
+
+        if threading.current_thread() is threading.main_thread():
+            self._previous = signal.signal(signal.SIGTERM, self._handle)
+        return self
+
+    def _handle(self, signum, frame):
+        self.received = True
+
+    def __exit__(self, *exc):
+        import signal
+
+        if self._previous is not None:
+            signal.signal(signal.SIGTERM, self._previous)
 
 
 # --------------------------------------------------------------------------- command
@@ -374,30 +397,34 @@ def run(args) -> int:
         file=sys.stderr,
         leave=False,
     )
-    previous = _catch_sigterm()
-    try:
-        for k in range(steps):
-            world.step()
-            everybody_left = not world.active.any()  # nothing more to see: stop early
-            if frames is not None and (
-                (k + 1) % args.every == 0 or k + 1 == steps or everybody_left
-            ):
-                frames.add(world.snapshot())
-            bar.update(1)
-            if args.checkpoint_every and (k + 1) % args.checkpoint_every == 0 and k + 1 < steps:
-                save_checkpoint(Path(args.checkpoint), world, checkpoint_meta())
-            if everybody_left:
-                break
-    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM (Terminated)
-        interrupted = exc
-    except UserError as exc:
-        if not args.checkpoint or frames is None or not str(exc).startswith("--render"):
-            raise
-        failed = exc
-    finally:
-        bar.close()
-    try:
-        return _finish(
+    with _SigtermFlag() as sigterm:
+        try:
+            for k in range(steps):
+                if sigterm.received:
+                    raise Terminated
+                world.step()
+                everybody_left = not world.active.any()  # nothing more to see: stop early
+                if frames is not None and (
+                    (k + 1) % args.every == 0 or k + 1 == steps or everybody_left
+                ):
+                    frames.add(world.snapshot())
+                bar.update(1)
+                if args.checkpoint_every and (k + 1) % args.checkpoint_every == 0 and k + 1 < steps:
+                    save_checkpoint(Path(args.checkpoint), world, checkpoint_meta())
+                if everybody_left:
+                    break
+        except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM (Terminated)
+            interrupted = exc
+        except UserError as exc:
+            if not args.checkpoint or frames is None or not str(exc).startswith("--render"):
+                raise
+            failed = exc
+        finally:
+            bar.close()
+        wall = time.perf_counter() - t0
+        stopped = interrupted or failed
+        # a SIGTERM while the outputs are written waits for them, then ends the run
+        status = _finish(
             args,
             world,
             frames,
@@ -406,12 +433,13 @@ def run(args) -> int:
             seed,
             overrides,
             start_step,
-            time.perf_counter() - t0,
+            wall,
             checkpoint_meta(),
-            interrupted or failed,
+            stopped,
         )
-    finally:
-        _restore_sigterm(previous)
+        if sigterm.received and stopped is None:
+            raise Terminated
+        return status
 
 
 def _finish(
@@ -491,21 +519,3 @@ def _check_options(args) -> None:
         check_output("--json", args.json)
     if args.render:
         check_output("--render", args.render, folder=True)
-
-
-def _catch_sigterm():
-    """Make SIGTERM raise :class:`Terminated` (so the run saves as on Ctrl-C); returns the
-    previous handler, or None where signals cannot be set (not the main thread)."""
-    import signal
-    import threading
-
-    if threading.current_thread() is not threading.main_thread():
-        return None
-    return signal.signal(signal.SIGTERM, _on_sigterm)
-
-
-def _restore_sigterm(previous) -> None:
-    import signal
-
-    if previous is not None:
-        signal.signal(signal.SIGTERM, previous)
