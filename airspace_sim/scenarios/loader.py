@@ -122,7 +122,7 @@ def _range(
     else:
         what = f"an {noun}" if integer else f"a {noun}"
     if hi is not None:
-        what += f" up to {hi:g}"
+        what += f" up to {hi}" if integer else f" up to {hi:g}"
     if unit:
         what += f" ({unit})"
 
@@ -144,7 +144,10 @@ def _points(limit: float) -> Callable[[Any], str | None]:
     def check(value):
         return None if ok(value) else f"expected coordinates within ±{limit:g} m"
 
-    return check  # no ``what``: a wrong shape keeps its type message
+    check.limit = (
+        f"coordinates within ±{limit:g} m"  # no ``what``: a wrong shape keeps its type message
+    )
+    return check
 
 
 def _params_range(meta, tp) -> Callable[[Any], str | None] | None:
@@ -233,6 +236,35 @@ RANGES: dict[str, Callable[[Any], str | None]] = {
     "TrafficSpec.max_turn_rate_deg": _range(0, 3600.0, unit="deg/s"),
     "TrafficSpec.controlled": NON_NEGATIVE_INT,
 }
+
+
+def ranges_table() -> str:
+    """The markdown table of every number's range in :data:`RANGES`, by dotted key
+    (``aircraft[].speed``): what scenarios/README.md shows (a test keeps them equal)."""
+    rows = ["| key | range |", "| --- | --- |"]
+
+    def walk(cls, prefix):
+        hints = _hints(cls)
+        for f in dataclasses.fields(cls):
+            if (cls.__name__, f.name) in INTERNAL_FIELDS:
+                continue
+            tp = hints[f.name]
+            key = f"{prefix}{f.name}"
+            inner = [a for a in typing.get_args(tp) if dataclasses.is_dataclass(a)]
+            if dataclasses.is_dataclass(tp) or inner:
+                walk(
+                    tp if dataclasses.is_dataclass(tp) else inner[0],
+                    key + ("[]." if inner else "."),
+                )
+                continue
+            check = RANGES.get(f"{cls.__name__}.{f.name}")
+            what = getattr(check, "what", None) or getattr(check, "limit", None)
+            numeric = {float, int} & {tp, *typing.get_args(tp)} or "float" in repr(tp)
+            if numeric and tp is not bool:
+                rows.append(f"| `{key}` | {what or 'any'} |")
+
+    walk(Scenario, "")
+    return "\n".join(rows)
 
 
 # --------------------------------------------------------------------------- conversion
