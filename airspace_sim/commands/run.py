@@ -29,7 +29,7 @@ import time
 from pathlib import Path
 
 from airspace_sim.commands._args import check_output, fps, frame_size, positive_int, seed
-from airspace_sim.errors import UserError
+from airspace_sim.errors import UserError, escape
 
 HELP = "run a scenario: step the world, print metrics, optionally render frames"
 
@@ -172,7 +172,7 @@ def format_table(summary: dict) -> str:
         ("wall time (s)", summary["wall_time"]),
         ("steps per second", summary["steps_per_second"]),
     ]
-    rows = [(k, _fmt(v)) for k, v in head]
+    rows = [(k, escape(_fmt(v))) for k, v in head]  # the name comes from the file
     metrics = _flatten(summary.get("metrics") or {})
     width = max(len(k) for k, _ in rows + [(m, 0) for m, _ in metrics] + [("metric", 0)])
     lines = [f"{k:<{width}}  {v}" for k, v in rows]
@@ -322,7 +322,7 @@ def run(args) -> int:
                 description = scenarios.load(name).description
             except UserError as exc:  # list the others anyway
                 description = f"(invalid: {exc})"
-            print(f"{name:<18} {description}")
+            print(f"{name:<18} {escape(description)}")
         return 0
     _check_options(args)
 
