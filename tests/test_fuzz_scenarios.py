@@ -110,7 +110,7 @@ def _run(data: dict, name: str):
     """Load ``data`` and step it; returns None, or raises (a UserError is fine)."""
     from airspace_sim.world import World
 
-    sc = loader.from_dict(data, source=f"{name}.toml", name=name)
+    sc = loader.from_dict(data, source=f"{name}.toml", name=name, runnable=True)  # as load()
     if len(sc.aircraft) + sc.traffic.count > MAX_STEPPED_AIRCRAFT:
         return
     world = World(sc)

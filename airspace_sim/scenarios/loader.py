@@ -718,11 +718,25 @@ def parse_toml(text: str, source: str) -> dict:
 
 
 def from_dict(
-    data: dict, source: str = "<memory>", overrides: Iterable[str] = (), name: str | None = None
+    data: dict,
+    source: str = "<memory>",
+    overrides: Iterable[str] = (),
+    name: str | None = None,
+    *,
+    runnable: bool = False,
 ) -> Scenario:
-    """Validate a TOML-like dict (after applying ``overrides``) into a :class:`Scenario`."""
+    """Validate a TOML-like dict (after applying ``overrides``) into a :class:`Scenario`.
+
+    With ``runnable`` (what :func:`load` asks for a scenario file) a table with no keys, or
+    a scenario with no aircraft and no traffic, is refused: there is nothing to simulate.
+    Without it such a scenario is a configuration code builds (defaults, a resolver's
+    parameters)."""
     import copy
 
+    if runnable and not data:
+        raise UserError(
+            f"{source}: empty scenario: expected [[aircraft]] tables or a [traffic] table"
+        )
     try:
         data = copy.deepcopy(data)
     except RecursionError:  # a dict built in Python; a file's nesting is caught by parse_toml
@@ -737,6 +751,11 @@ def from_dict(
         check_parts(sc)
     except Invalid as exc:
         raise UserError(_where(exc, source, set_paths)) from None
+    if runnable and not sc.aircraft and sc.traffic.count == 0:
+        raise UserError(
+            f"{source}: aircraft: expected at least one aircraft ([[aircraft]] tables or "
+            "[traffic] with a count), got none: nothing to simulate"
+        )
     return sc
 
 
@@ -760,15 +779,4 @@ def load(name_or_path: str | os.PathLike, overrides: Iterable[str] = ()) -> Scen
     except (OSError, UnicodeDecodeError) as exc:
         raise UserError(f"{source}: cannot read: {exc}") from None
     data = parse_toml(text, source)
-    if not data:
-        raise UserError(
-            f"{source}: empty scenario: expected [[aircraft]] tables or a [traffic] table"
-        )
-    sc = from_dict(data, source, overrides, name=path.stem)
-    # only here, not in from_dict: code builds aircraft-less scenarios as configurations
-    if not sc.aircraft and sc.traffic.count == 0:
-        raise UserError(
-            f"{source}: aircraft: expected at least one aircraft ([[aircraft]] tables or "
-            "[traffic] with a count), got none: nothing to simulate"
-        )
-    return sc
+    return from_dict(data, source, overrides, name=path.stem, runnable=True)
