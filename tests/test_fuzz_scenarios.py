@@ -56,7 +56,8 @@ OTHER_VALUES = [
     "", " ", "x", "radar", "imm", "bands", "ring", "random", "\n", "\x1b[31m", True, False,
     [], [0.0], [0.0, 0.0], [1e308, 0.0], [[0.0, 0.0]], {}, {"bogus": 1}, [[[[]]]],
 ]  # fmt: skip
-VALUES = st.sampled_from(EXTREME_NUMBERS + OTHER_VALUES)
+# a fresh copy each draw: a shared {} or [] put in two places could grow into a cycle
+VALUES = st.sampled_from(EXTREME_NUMBERS + OTHER_VALUES).map(copy.deepcopy)
 
 
 def _paths(node, prefix=()):

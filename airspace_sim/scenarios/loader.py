@@ -168,6 +168,8 @@ def _params_range(meta, tp) -> Callable[[Any], str | None] | None:
 MAX_DISTANCE_M = 1e7  #: ranges, radii, sectors: 10 000 km
 MAX_COORDINATE_M = 1e8  #: positions and waypoints
 MAX_SPEED = 1000.0  #: m/s (about Mach 3)
+#: m/s: slower is not flight, and a speed of 5e-324 m/s made path metrics 0 / 0
+MIN_SPEED = 1.0
 MAX_TIME_S = 1e7  #: durations and time constants: about 4 months
 MAX_LOOKAHEAD_S = 3600.0
 MAX_STEPS = 10_000_000  #: duration / dt
@@ -222,7 +224,7 @@ RANGES: dict[str, Callable[[Any], str | None]] = {
     "AircraftSpec.position": _points(MAX_COORDINATE_M),
     "AircraftSpec.waypoints": _points(MAX_COORDINATE_M),
     "AircraftSpec.heading_deg": _range(-MAX_HEADING_DEG, MAX_HEADING_DEG, unit="deg"),
-    "AircraftSpec.speed": _range(0, MAX_SPEED, lo_open=True, unit="m/s"),
+    "AircraftSpec.speed": _range(MIN_SPEED, MAX_SPEED, unit="m/s"),
     "AircraftSpec.autopilot": _one_of_registry("autopilot"),
     "AircraftSpec.max_turn_rate_deg": _range(0, 3600.0, unit="deg/s"),
     "TrafficSpec.pattern": _one_of(TRAFFIC_PATTERNS),
@@ -230,7 +232,7 @@ RANGES: dict[str, Callable[[Any], str | None]] = {
     "TrafficSpec.radius": _range(0, MAX_DISTANCE_M, lo_open=True, unit="m"),
     "TrafficSpec.sector": _range(0, MAX_DISTANCE_M, lo_open=True, unit="m"),
     "TrafficSpec.spawn_clear_s": _range(0, MAX_LOOKAHEAD_S, unit="s"),
-    "TrafficSpec.speed": _range(0, MAX_SPEED, lo_open=True, unit="m/s"),
+    "TrafficSpec.speed": _range(MIN_SPEED, MAX_SPEED, unit="m/s"),
     "TrafficSpec.speed_spread": _range(0, MAX_SPEED, unit="m/s"),
     "TrafficSpec.autopilot": _one_of_registry("autopilot"),
     "TrafficSpec.max_turn_rate_deg": _range(0, 3600.0, unit="deg/s"),
@@ -515,10 +517,11 @@ def check_scenario(sc: Scenario) -> None:
             "traffic.pattern",
             f"expected ring, random or encounter with count {t.count}, got 'none'",
         )
-    if t.speed_spread >= t.speed:
+    if t.speed - t.speed_spread < MIN_SPEED:
         raise Invalid(
             "traffic.speed_spread",
-            f"expected less than traffic.speed ({t.speed:g} m/s), got {t.speed_spread:g}",
+            f"expected at most traffic.speed − {MIN_SPEED:g} m/s ({t.speed - MIN_SPEED:g} m/s: "
+            f"generated speeds stay ≥ {MIN_SPEED:g} m/s), got {t.speed_spread:g}",
         )
     if t.pattern == "encounter" and not sc.aircraft:
         raise Invalid(
