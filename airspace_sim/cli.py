@@ -30,10 +30,20 @@ def _command_modules() -> dict:
     return {n: importlib.import_module(f"airspace_sim.commands.{n}") for n in names}
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argparse parser whose errors are one line (what, the option, the value) and a
+    pointer to ``--help``, not the usage block: the same shape as every other error."""
+
+    def error(self, message: str):
+        from airspace_sim.errors import escape
+
+        self.exit(2, f"{self.prog}: error: {escape(message)} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from airspace_sim import __version__
 
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="airspace-sim",
         description="2D multi-aircraft airspace simulator with IMM tracking and "
         "conflict detection and avoidance.",
@@ -59,9 +69,11 @@ def main(argv: list[str] | None = None) -> int:
     except UserError as exc:
         print(f"airspace-sim {args.command}: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"airspace-sim {args.command}: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM where a command catches it
+        status = getattr(exc, "exit_status", 130)
+        what = "terminated" if status == 143 else "interrupted"
+        print(f"airspace-sim {args.command}: {what}", file=sys.stderr)
+        return status
 
 
 if __name__ == "__main__":  # pragma: no cover

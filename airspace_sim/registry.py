@@ -8,11 +8,18 @@ third party would ship them, by :func:`load_plugins`:
 - a plugins folder: every ``*.py`` file in the folders listed in the environment variable
   ``AIRSPACE_SIM_PLUGINS`` (``os.pathsep``-separated) and in ``./plugins`` is imported.
 
+The shipped plugins ``kalman`` and ``mvp`` (the files in the repository's ``plugins/``
+folder, installed as the package ``airspace_sim_plugins``) are entry points of this
+package's own distribution, so an installed airspace-sim finds them from any folder; a
+plugins-folder file that is one of them (the repository's ``./plugins``) is not imported a
+second time.
+
 Every part is a class fitting its protocol in :mod:`airspace_sim.parts`, checked when it is
 registered; parts are constructed only by :func:`build`. The registry is per process but
 holds only classes, never simulation state, so several worlds in one process do not
-interfere. A plugin that fails to import or to register is one :class:`UserError` line
-naming it.
+interfere. A plugin that fails to import or to register (even by ``sys.exit``) is one
+:class:`UserError` line naming it, raised by every later lookup too: the registry is
+incomplete, and whatever asks (each scenario of ``run --list``) is told why.
 """
 
 from __future__ import annotations
@@ -31,7 +38,9 @@ KINDS = ("autopilot", "sensor", "tracker", "resolver")
 ENTRY_POINT_GROUP = "airspace_sim.plugins"
 
 _REGISTRY: dict[str, dict[str, type]] = {kind: {} for kind in KINDS}
-_loaded_plugins = False
+#: False until the built-ins and plugins are loaded, then True, or the :class:`UserError`
+#: of the plugin that failed (raised again by every lookup).
+_loaded_plugins: bool | UserError = False
 
 
 def register(kind: str, name: str, *, replace: bool = False) -> Callable[[type], type]:
@@ -113,11 +122,17 @@ def build(kind: str, name: str, *args, params=None):
 
 def _ensure_loaded() -> None:
     global _loaded_plugins
+    if isinstance(_loaded_plugins, UserError):
+        raise UserError(str(_loaded_plugins))
     if _loaded_plugins:
         return
     _loaded_plugins = True
     _import_builtins()
-    load_plugins()
+    try:
+        load_plugins()
+    except UserError as exc:
+        _loaded_plugins = exc
+        raise
 
 
 def _import_builtins() -> None:
@@ -142,6 +157,7 @@ def plugin_folders() -> list[Path]:
 def load_plugins() -> list[str]:
     """Import entry-point plugins and plugin-folder files; return what was loaded."""
     loaded = []
+    files = set()  # of entry-point modules: a plugins-folder copy of one is skipped
     for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
         try:
             obj = ep.load()
@@ -155,8 +171,11 @@ def load_plugins() -> list[str]:
                 f" (distribution {dist})" if dist else ""
             )
             raise UserError(f"plugin {where}: failed to load: {_one_line(exc)}") from exc
+        module_file = getattr(sys.modules.get(ep.module), "__file__", None)
+        if module_file:
+            files.add(Path(module_file).resolve())
         loaded.append(f"entry point {ep.name}")
-    seen = set()
+    seen = set(files)
     for folder in plugin_folders():
         if not folder.is_dir():
             continue

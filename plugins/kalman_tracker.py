@@ -1,7 +1,8 @@
 """Tracker plugin ``"kalman"``: a single-model constant-velocity Kalman filter (a baseline).
 
-Loaded by :func:`airspace_sim.registry.load_plugins` from ``./plugins`` (or a folder in
-``$AIRSPACE_SIM_PLUGINS``, or an ``airspace_sim.plugins`` entry point naming this module).
+Shipped: installed as ``airspace_sim_plugins.kalman_tracker`` and registered through the
+package's own ``airspace_sim.plugins`` entry point (docs/plugins.md), so an installed
+airspace-sim finds it anywhere; copy this file into a plugins folder to write your own.
 Use it in a scenario with ``[tracker] kind = "kalman"`` or ``--set tracker.kind=kalman``.
 
 It is a :class:`airspace_sim.parts.Tracker`: tracks live in stable slots (births fill free

@@ -14,7 +14,8 @@ keeps the speed and turns toward the heading of ``v_own + ΣΔv``, clipped to th
 Exactly head-on (``|d|`` ≈ 0) it turns right, as the rules of the air say.
 
 A pair is in conflict when ``0 < t < lookahead_s`` and ``|d| < r_safe (1 + margin)``, or when
-it is already closer than ``r_safe`` and still closing. Use with ``[resolver] kind = "mvp"``.
+it is already closer than ``r_safe`` and still closing. Use with ``[resolver] kind = "mvp"``;
+shipped as ``airspace_sim_plugins.mvp_resolver`` through the package's own entry point.
 """
 
 from __future__ import annotations

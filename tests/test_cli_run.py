@@ -154,7 +154,10 @@ def test_mp4_without_ffmpeg_is_one_line(tmp_path, monkeypatch, capsys):
     [
         (["--steps", "0"], "--steps: expected a positive integer, got 0"),
         (["--steps", "2.5"], "--steps: expected a positive integer, got '2.5'"),
-        (["--seed", "-1"], "--seed: expected a non-negative integer, got -1"),
+        (
+            ["--seed", "-1"],
+            "--seed: expected a seed from 0 to 2**63-1 = 9223372036854775807, got -1",
+        ),
         (["--every", "x"], "--every: expected a positive integer, got 'x'"),
         (["--fps", "0"], "--fps: expected a positive number, got '0'"),
         (["--fps", "nan"], "--fps: expected a positive number, got 'nan'"),
@@ -169,8 +172,8 @@ def test_bad_option_values_name_the_option(capsys, args, needle):
         build_parser().parse_args(["run", "head_on", *args])
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err[-1] == f"airspace-sim run: error: argument {needle}", err
-    assert "Traceback" not in "\n".join(err)
+    assert len(err) == 1, err
+    assert err[0] == f"airspace-sim run: error: argument {needle} (see airspace-sim run --help)"
 
 
 def test_option_types_accept_good_values():
@@ -405,112 +408,6 @@ def test_checkpoint_stores_the_world_and_resumes_it_bit_for_bit(tmp_path, monkey
     final_whole, _ = load_checkpoint(whole_ckpt)
     final_rest, _ = load_checkpoint(part)
     assert world_state(final_rest) == world_state(final_whole)
-
-
-def _checkpoint_bytes(tmp_path, capsys) -> bytes:
-    path = tmp_path / "good.ckpt"
-    proc = main_in_process(
-        capsys, "run", "head_on", "--steps", "2", "--checkpoint", str(path), "--quiet"
-    )
-    assert proc.returncode == 0, proc.stderr
-    return path.read_bytes()
-
-
-def _header_and_payload(data: bytes):
-    magic, fmt, header, payload = data.split(b"\n", 3)
-    return magic + b"\n", fmt + b"\n", json.loads(header), payload
-
-
-def _with_payload(data: bytes, payload: bytes) -> bytes:
-    import hashlib
-
-    magic, fmt, header, _ = _header_and_payload(data)
-    header["world_bytes"] = len(payload)
-    header["world_sha256"] = hashlib.sha256(payload).hexdigest()
-    return magic + fmt + json.dumps(header).encode() + b"\n" + payload
-
-
-class _TouchOnUnpickle:
-    """Unpickling this creates a file: proof that a refused file was never unpickled."""
-
-    def __init__(self, marker):
-        self.marker = str(marker)
-
-    def __reduce__(self):
-        return (Path.touch, (Path(self.marker),))
-
-
-@needs_world
-def test_resume_refuses_files_that_are_not_checkpoints(tmp_path, monkeypatch, capsys):
-    import pickle
-
-    monkeypatch.chdir(tmp_path)
-    good = _checkpoint_bytes(tmp_path, capsys)
-    marker = tmp_path / "unpickled"
-    evil = pickle.dumps(_TouchOnUnpickle(marker))
-    magic, fmt, header, payload = _header_and_payload(good)
-    other_format = good.replace(b"format 2\n", b"format 3\n", 1)
-    assert other_format != good
-    flipped = bytearray(good)
-    flipped[-20] ^= 0xFF
-    cases = {
-        "random.bin": (np.random.default_rng(0).bytes(4096), "not an airspace-sim checkpoint"),
-        "empty.ckpt": (b"", "not an airspace-sim checkpoint"),
-        "a-pickle.pkl": (evil, "not an airspace-sim checkpoint"),
-        "old-format-1.pkl": (
-            pickle.dumps({"format": 1, "meta": {}, "world": None}),
-            "not an airspace-sim checkpoint",
-        ),
-        "format3.ckpt": (other_format, "checkpoint format 3, this airspace-sim reads format 2"),
-        "truncated.ckpt": (good[: len(good) // 2], "truncated or damaged checkpoint"),
-        "longer.ckpt": (good + b"x", "truncated or damaged checkpoint"),
-        "header-cut.ckpt": (magic + fmt + b'{"meta": ', "damaged checkpoint header"),
-        "no-format.ckpt": (magic, "damaged checkpoint header (no format line)"),
-        "flipped.ckpt": (bytes(flipped), "damaged checkpoint (checksum mismatch)"),
-        "other-object.ckpt": (
-            _with_payload(good, pickle.dumps({"step_count": 3})),
-            "holds a dict, not a World",
-        ),
-    }
-    for name, (data, why) in cases.items():
-        (tmp_path / name).write_bytes(data)
-        proc = main_in_process(capsys, "run", "--resume", name)
-        assert_one_line_error(proc, f"--resume {name}: ", why)
-        assert not marker.exists(), name  # refused before unpickling anything
-    # control: a payload that passes the header and the checksum is unpickled (trusted), then
-    # refused as not a World
-    (tmp_path / "evil-payload.ckpt").write_bytes(_with_payload(good, evil))
-    proc = main_in_process(capsys, "run", "--resume", "evil-payload.ckpt")
-    assert_one_line_error(proc, "holds a NoneType, not a World")
-    assert marker.exists()
-    assert_one_line_error(
-        main_in_process(capsys, "run", "--resume", "nope.pkl"), "nope.pkl", "no such file"
-    )
-    assert_one_line_error(
-        main_in_process(capsys, "run", "--resume", str(tmp_path)), str(tmp_path), "is a folder"
-    )
-    # the same through a subprocess: exit status 2, one line, no traceback
-    assert_one_line_error(
-        cli("run", "--resume", "random.bin", cwd=tmp_path),
-        "--resume random.bin: not an airspace-sim checkpoint",
-    )
-
-
-@needs_world
-def test_resume_under_other_code_warns_once(tmp_path, monkeypatch, capsys):
-    monkeypatch.chdir(tmp_path)
-    good = _checkpoint_bytes(tmp_path, capsys)
-    magic, fmt, header, payload = _header_and_payload(good)
-    header["code"] = "0" * 16
-    (tmp_path / "other.ckpt").write_bytes(
-        magic + fmt + json.dumps(header).encode() + b"\n" + payload
-    )
-    (tmp_path / "same.ckpt").write_bytes(good)
-    proc = main_in_process(capsys, "run", "--resume", "other.ckpt", "--steps", "1", "--quiet")
-    assert proc.returncode == 0
-    assert proc.stderr.count("warning") == 1 and "other.ckpt was saved by other" in proc.stderr
-    proc = main_in_process(capsys, "run", "--resume", "same.ckpt", "--steps", "1", "--quiet")
-    assert proc.returncode == 0 and proc.stderr == ""
 
 
 def test_checkpoint_does_not_overwrite_other_files(tmp_path, monkeypatch, capsys):

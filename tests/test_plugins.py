@@ -1,11 +1,13 @@
 """Plugins: found by name via a plugins folder and via an entry point; clear errors otherwise.
 
 The ``kalman`` tracker in ``plugins/kalman_tracker.py`` is the plugin under test; each test
-starts from a registry without it and restores the registry afterwards.
+starts from a registry without it (and without the package's own entry points, which ship
+it) and restores the registry afterwards.
 """
 
 from __future__ import annotations
 
+import importlib.metadata
 import importlib.util
 import os
 import shutil
@@ -23,6 +25,7 @@ from airspace_sim.errors import UserError
 REPO = Path(__file__).resolve().parent.parent
 PLUGIN = REPO / "plugins" / "kalman_tracker.py"
 PREFIX = "airspace_sim_plugin_"
+SHIPPED = "airspace_sim_plugins."  # the package the repository's plugins/ installs as
 
 
 @pytest.fixture
@@ -35,7 +38,17 @@ def clean_registry(monkeypatch, tmp_path):
     for k in saved_modules:
         del sys.modules[k]
     registry._REGISTRY["tracker"].pop("kalman", None)
+    registry._REGISTRY["resolver"].pop("mvp", None)
     registry._loaded_plugins = False
+    real_entry_points = importlib.metadata.entry_points
+
+    def without_shipped(**kw):
+        found = real_entry_points(**kw)
+        if kw.get("group") != registry.ENTRY_POINT_GROUP:
+            return found  # numba's, for one
+        return [e for e in found if not e.value.startswith(SHIPPED)]
+
+    monkeypatch.setattr(importlib.metadata, "entry_points", without_shipped)
     work = tmp_path / "work"
     work.mkdir()
     monkeypatch.chdir(work)
@@ -156,6 +169,91 @@ def test_cli_reports_broken_plugin_in_one_line(tmp_path):
     assert len(lines) == 1 and "broken.py" in lines[0] and "ZeroDivisionError" in lines[0], (
         proc.stderr
     )
+
+
+def _cli(*args, cwd):
+    env = {**os.environ, "AIRSPACE_SIM_PLUGINS": ""}
+    return subprocess.run(
+        [sys.executable, "-m", "airspace_sim", *args],
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+
+
+@pytest.mark.parametrize(
+    "source,needle",
+    [
+        ("import sys\nsys.exit(3)\n", "SystemExit: 3"),
+        ("raise SystemExit('bye')\n", "SystemExit: bye"),
+        ("raise KeyError('a\\nb\\x1b[31m')\n", "KeyError: 'a\\nb\\x1b[31m'"),
+    ],
+)
+def test_plugin_that_exits_at_import_is_one_line_and_exit_2(tmp_path, source, needle):
+    (tmp_path / "plugins").mkdir()
+    (tmp_path / "plugins" / "quits.py").write_text(source)
+    proc = _cli("run", "head_on", "--steps", "1", cwd=tmp_path)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
+    assert lines[0].startswith("airspace-sim run: error: plugin ")
+    assert "quits.py: failed to load: " in lines[0] and needle in lines[0], lines[0]
+    assert "\x1b" not in proc.stderr  # an escape sequence is shown escaped, never sent
+
+
+def test_a_failed_plugin_marks_every_scenario_of_run_list(tmp_path):
+    (tmp_path / "plugins").mkdir()
+    (tmp_path / "plugins" / "quits.py").write_text("import sys\nsys.exit(3)\n")
+    proc = _cli("run", "--list", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.strip().splitlines()
+    from airspace_sim.scenarios import available
+
+    assert len(lines) == len(available()) >= 7
+    for line in lines:
+        assert "(invalid: plugin " in line and "quits.py: failed to load: SystemExit: 3" in line
+
+
+def test_a_failed_plugin_is_raised_by_every_lookup(clean_registry):
+    (clean_registry / "plugins").mkdir()
+    (clean_registry / "plugins" / "broken.py").write_text("1 / 0\n")
+    messages = []
+    for lookup in (lambda: registry.names("tracker"), lambda: registry.get("resolver", "bands")):
+        with pytest.raises(UserError) as info:
+            lookup()
+        messages.append(str(info.value))
+    assert (
+        messages[0] == messages[1] and "broken.py: failed to load: ZeroDivisionError" in messages[0]
+    )
+
+
+def test_shipped_plugins_are_found_outside_the_repository(tmp_path):
+    """An installed airspace-sim (here the editable install, run from a folder with no
+    plugins/) finds kalman and mvp through its own entry points."""
+    proc = _cli(
+        "run", "head_on", "--steps", "3", "--quiet",
+        "--set", 'tracker.kind="kalman"', "--set", 'resolver.kind="mvp"',
+        cwd=tmp_path,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    eps = {e.name: e.value for e in importlib.metadata.entry_points(group="airspace_sim.plugins")}
+    assert eps["kalman"] == "airspace_sim_plugins.kalman_tracker"
+    assert eps["mvp"] == "airspace_sim_plugins.mvp_resolver"
+    import airspace_sim_plugins.kalman_tracker as shipped
+
+    assert Path(shipped.__file__).resolve() == PLUGIN.resolve()  # the file users read
+
+
+def test_repository_plugins_folder_is_not_loaded_twice(monkeypatch):
+    """From the repository (./plugins holds the shipped files) the entry points load them
+    and the folder scan skips the same files: no "would replace" error."""
+    monkeypatch.chdir(REPO)
+    monkeypatch.delenv("AIRSPACE_SIM_PLUGINS", raising=False)
+    loaded = registry.load_plugins()
+    assert "entry point kalman" in loaded and "entry point mvp" in loaded
+    assert not [x for x in loaded if x.endswith(".py")], loaded
 
 
 # --------------------------------------------------------------------------- the Kalman tracker

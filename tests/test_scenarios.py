@@ -125,8 +125,8 @@ speed = {speed}
     [
         (BASE + "[traffic]\ncount = -3\n", "traffic.count", "-3", "non-negative integer"),
         (BASE + "[traffic]\ncout = 3\n", "traffic.cout", "3", "unknown key"),
-        (BASE + "dt = 'fast'\n", "dt", "'fast'", "positive number"),
-        (BASE + "dt = 0\n", "dt", "0", "positive number"),
+        (BASE + "dt = 'fast'\n", "dt", "'fast'", "a number ≥ 0.001"),
+        (BASE + "dt = 0\n", "dt", "0", "a number ≥ 0.001"),
         (
             BASE + "[sensor]\ndetection_probability = 1.5\n",
             "sensor.detection_probability",
@@ -137,8 +137,13 @@ speed = {speed}
         (BASE + "[traffic]\npattern = 'spiral'\n", "traffic.pattern", "'spiral'", "one of"),
         (BASE + "model = 'nope'\n", "model", "'nope'", "one of"),
         (BASE + "[separation]\nr_safe = nan\n", "separation.r_safe", "nan", "positive number"),
-        (BASE + AIRCRAFT.format(speed="-1.0"), "aircraft[1].speed", "-1.0", "positive"),
-        (BASE + AIRCRAFT.format(speed='"x"'), "aircraft[1].speed", "'x'", "positive number"),
+        (
+            BASE + AIRCRAFT.format(speed="-1.0"),
+            "aircraft[1].speed",
+            "-1.0",
+            "a number ≥ 1 up to 1000 (m/s)",
+        ),
+        (BASE + AIRCRAFT.format(speed='"x"'), "aircraft[1].speed", "'x'", "a number ≥ 1"),
         (
             BASE + AIRCRAFT.format(speed="1.0") + "color = 'red'\n",
             "aircraft[1].color",
@@ -487,10 +492,10 @@ def _with(path: str, value):
 @pytest.mark.parametrize(
     "path,value,expected",
     [
-        ("dt", math.nan, "dt: expected a positive number up to 60 (s), got nan"),
-        ("dt", math.inf, "dt: expected a positive number up to 60 (s), got inf"),
-        ("dt", 0.0, "dt: expected a positive number up to 60 (s), got 0.0"),
-        ("dt", 5e-324, "duration: expected at most 10000000 steps"),
+        ("dt", math.nan, "dt: expected a number ≥ 0.001 up to 60 (s), got nan"),
+        ("dt", math.inf, "dt: expected a number ≥ 0.001 up to 60 (s), got inf"),
+        ("dt", 0.0, "dt: expected a number ≥ 0.001 up to 60 (s), got 0.0"),
+        ("dt", 5e-324, "dt: expected a number ≥ 0.001 up to 60 (s), got 5e-324"),
         ("aircraft[1].id", "a", "aircraft[1].id: duplicate aircraft id, got 'a'"),
         (
             "aircraft[0].position",
@@ -498,8 +503,8 @@ def _with(path: str, value):
             "aircraft[0].position[0]: expected a finite number, got inf",
         ),
         ("aircraft[0].position", [1e200, 0.0], "aircraft[0].position: expected coordinates"),
-        ("aircraft[0].speed", -1.0, "aircraft[0].speed: expected a positive number"),
-        ("aircraft[0].speed", 1e308, "aircraft[0].speed: expected a positive number up to 1000"),
+        ("aircraft[0].speed", -1.0, "aircraft[0].speed: expected a number ≥ 1 up to 1000 (m/s)"),
+        ("aircraft[0].speed", 1e308, "aircraft[0].speed: expected a number ≥ 1 up to 1000"),
         ("aircraft[0].max_turn_rate_deg", -1.0, "max_turn_rate_deg: expected a non-negative"),
         ("sensor.sigma", -1.0, "sensor.sigma: expected a non-negative number up to 100000 (m)"),
         ("sensor.sigma", 1e308, "sensor.sigma: expected a non-negative number"),

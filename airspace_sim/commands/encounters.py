@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import math
 
+from airspace_sim.commands._args import check_output, seed
+
 HELP = "Run a seeded Monte Carlo campaign of encounters; write parquet and print a summary"
 
 
@@ -50,7 +52,7 @@ def add_arguments(parser) -> None:
     parser.add_argument(
         "--out", default="results.parquet", help="output parquet file (default results.parquet)"
     )
-    parser.add_argument("--seed", type=int, default=0, help="campaign seed (default 0)")
+    parser.add_argument("--seed", type=seed, default=0, help="campaign seed (default 0)")
     parser.add_argument(
         "--chunk-size", type=int, default=100, help="encounters per unit of work (default 100)"
     )
@@ -89,12 +91,8 @@ def run(args) -> int:
         raise UserError(
             f"--max-turn-rate: must be a positive number of deg/s, got {args.max_turn_rate!r}"
         )
-    if args.summary_md:  # outputs checked before the work
-        from pathlib import Path
-
-        parent = Path(args.summary_md).resolve().parent
-        if not parent.is_dir():
-            raise UserError(f"--summary-md: folder {parent} does not exist")
+    if args.summary_md:  # before the campaign, not after it ran
+        check_output("--summary-md", args.summary_md)
     if args.address and args.backend != "ray":
         raise UserError("--address: only with --backend ray")
     cfg = EncounterConfig(
@@ -130,5 +128,8 @@ def run(args) -> int:
         text = format_summary(rows, markdown=True) + "\n"
         if breakdown:
             text += "\n" + format_oracle_breakdown(breakdown, markdown=True) + "\n"
-        Path(args.summary_md).write_text(text)
+        try:
+            Path(args.summary_md).write_text(text)
+        except OSError as exc:
+            raise UserError(f"--summary-md {args.summary_md}: cannot write: {exc}") from None
     return 0

@@ -28,8 +28,8 @@ import sys
 import time
 from pathlib import Path
 
-from airspace_sim.commands._args import frame_size, non_negative_int, positive_float, positive_int
-from airspace_sim.errors import UserError
+from airspace_sim.commands._args import check_output, fps, frame_size, positive_int, seed
+from airspace_sim.errors import UserError, escape
 
 HELP = "run a scenario: step the world, print metrics, optionally render frames"
 
@@ -44,9 +44,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=positive_int,
         help="world steps to run (default: the scenario's duration / dt)",
     )
-    parser.add_argument(
-        "--seed", type=non_negative_int, help="random seed (default: the scenario's seed)"
-    )
+    parser.add_argument("--seed", type=seed, help="random seed (default: the scenario's seed)")
     parser.add_argument(
         "--set",
         dest="overrides",
@@ -84,7 +82,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--fps",
-        type=positive_float,
+        type=fps,
         default=10.0,
         help="frames per second of the GIF/MP4 (default 10)",
     )
@@ -98,7 +96,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--checkpoint",
         metavar="PATH",
-        help="save the world to PATH at the end (and on Ctrl-C) to resume later",
+        help="save the world to PATH at the end (and on Ctrl-C or SIGTERM) to resume later",
     )
     parser.add_argument(
         "--checkpoint-every",
@@ -174,7 +172,7 @@ def format_table(summary: dict) -> str:
         ("wall time (s)", summary["wall_time"]),
         ("steps per second", summary["steps_per_second"]),
     ]
-    rows = [(k, _fmt(v)) for k, v in head]
+    rows = [(k, escape(_fmt(v))) for k, v in head]  # the name comes from the file
     metrics = _flatten(summary.get("metrics") or {})
     width = max(len(k) for k, _ in rows + [(m, 0) for m, _ in metrics] + [("metric", 0)])
     lines = [f"{k:<{width}}  {v}" for k, v in rows]
@@ -189,7 +187,7 @@ def _write_json(path: Path, summary: dict) -> None:
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(summary, indent=2) + "\n")
     except OSError as exc:
-        raise UserError(f"cannot write {path}: {exc}") from None
+        raise UserError(f"cannot write {path}: {_why(exc)}") from None
 
 
 def track_owners(snap, text: str | None):
@@ -232,173 +230,84 @@ class Frames:
 
     def add(self, snapshot) -> None:
         """Draw and write one :class:`~airspace_sim.world.snapshot.Snapshot`."""
-        self.writer.add(self.renderer.render(snapshot))
+        frame = self.renderer.render(snapshot)
+        try:
+            self.writer.add(frame)
+        except OSError as exc:
+            raise UserError(
+                f"--render {self.directory}: cannot write a frame: {_why(exc)}"
+            ) from None
 
     def close(self) -> Path | None:
         """Finish the video; its path, or None."""
-        return self.writer.close()
+        try:
+            return self.writer.close()
+        except OSError as exc:
+            raise UserError(
+                f"--render {self.directory}: cannot write the video: {_why(exc)}"
+            ) from None
+
+
+def _why(exc: OSError) -> str:
+    return f"[Errno {exc.errno}] {exc.strerror}" if exc.errno else str(exc)
 
 
 # --------------------------------------------------------------------------- checkpoints
-#
-# A checkpoint is the pickled World behind a header that is read and checked before anything
-# is unpickled:
-#
-#     AIRSPACE-SIM CHECKPOINT\n        magic line
-#     format 2\n                       format version
-#     {"meta": ..., "code": ..., "world_bytes": L, "world_sha256": ...}\n    one JSON line
-#     <L bytes: pickle of the World>
-#
-# A file without the magic line, of another format version, with a malformed header, shorter
-# or longer than the header says, or whose payload does not match its checksum is refused
-# with one line naming the file. The checksum catches damage, not tampering: a checkpoint is
-# a pickle, so resume only files you trust. The header records a fingerprint of the sources;
-# resuming under other code warns (a World pickled by other code may not load or may step
-# differently).
-
-CHECKPOINT_MAGIC = b"AIRSPACE-SIM CHECKPOINT\n"
-CHECKPOINT_FORMAT = 2
-_MAX_HEADER_BYTES = 1 << 20  # the JSON line holds metadata only
-
-
-def code_fingerprint() -> str:
-    """SHA-256 (hex, 16 digits) of the ``airspace_sim`` package's Python sources.
-
-    A checkpoint resumes bit-identically only under the code that wrote it; resuming under
-    other code is allowed but warned about (:func:`load_checkpoint`).
-    """
-    import hashlib
-
-    import airspace_sim
-
-    root = Path(airspace_sim.__file__).parent
-    h = hashlib.sha256()
-    for f in sorted(root.rglob("*.py")):
-        h.update(f.relative_to(root).as_posix().encode())
-        h.update(b"\0")
-        h.update(f.read_bytes())
-    return h.hexdigest()[:16]
-
-
-def is_checkpoint(path: Path) -> bool:
-    """Whether ``path`` starts with the checkpoint magic line (contents not checked)."""
-    try:
-        with open(path, "rb") as f:
-            return f.read(len(CHECKPOINT_MAGIC)) == CHECKPOINT_MAGIC
-    except OSError:
-        return False
+# The file format and its authentication live in :mod:`airspace_sim.world.checkpoint`; here
+# the options' names are put in front of its one-line errors.
 
 
 def save_checkpoint(path: Path, world, meta: dict) -> None:
-    """Write ``world`` (pickled) and ``meta`` (JSON-able dict) to ``path`` atomically."""
-    import hashlib
-    import pickle
+    """:func:`airspace_sim.world.checkpoint.save`, its errors naming ``--checkpoint``."""
+    from airspace_sim.world import checkpoint
 
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise UserError(f"--checkpoint {path}: cannot create folder: {exc}") from None
-    blob = pickle.dumps(world, protocol=pickle.HIGHEST_PROTOCOL)
-    header = {
-        "meta": meta,
-        "code": code_fingerprint(),
-        "steps_taken": int(world.step_count),
-        "world_bytes": len(blob),
-        "world_sha256": hashlib.sha256(blob).hexdigest(),
-    }
-    tmp = path.with_name(path.name + ".tmp")
-    try:
-        with open(tmp, "wb") as f:
-            f.write(CHECKPOINT_MAGIC)
-            f.write(f"format {CHECKPOINT_FORMAT}\n".encode())
-            f.write(json.dumps(header, separators=(",", ":")).encode() + b"\n")
-            f.write(blob)
-        tmp.replace(path)
-    except OSError as exc:
-        tmp.unlink(missing_ok=True)
-        raise UserError(f"--checkpoint {path}: cannot write: {exc}") from None
-
-
-def _read_header(path: Path, f) -> dict:
-    """Check the magic line, the format and the JSON header of an open checkpoint file."""
-
-    def refuse(why: str):
-        raise UserError(f"--resume {path}: {why}")
-
-    if f.read(len(CHECKPOINT_MAGIC)) != CHECKPOINT_MAGIC:
-        refuse("not an airspace-sim checkpoint (no checkpoint header)")
-    line = f.readline(64)
-    words = line.split()
-    if len(words) != 2 or words[0] != b"format" or not line.endswith(b"\n"):
-        refuse("damaged checkpoint header (no format line)")
-    if words[1] != str(CHECKPOINT_FORMAT).encode():
-        found = words[1].decode("ascii", "replace")
-        refuse(f"checkpoint format {found}, this airspace-sim reads format {CHECKPOINT_FORMAT}")
-    line = f.readline(_MAX_HEADER_BYTES)
-    try:
-        header = json.loads(line) if line.endswith(b"\n") else None
-    except ValueError:
-        header = None
-    required = {"meta": dict, "code": str, "world_bytes": int, "world_sha256": str}
-    if not isinstance(header, dict) or any(
-        not isinstance(header.get(k), t) for k, t in required.items()
-    ):
-        refuse("damaged checkpoint header")
-    meta_types = {"scenario": str, "seed": int, "overrides": list, "total_steps": int}
-    if any(not isinstance(header["meta"].get(k), t) for k, t in meta_types.items()):
-        refuse("damaged checkpoint header (run metadata)")
-    return header
+        checkpoint.save(path, world, meta)
+    except UserError as exc:
+        raise UserError(f"--checkpoint {exc}") from None
 
 
 def load_checkpoint(path: Path):
-    """The world saved in ``path`` by :func:`save_checkpoint`, and its metadata.
-
-    Raises :class:`UserError` (one line naming ``path``) for a missing file or one that is
-    not a readable checkpoint; unpickles only after the header and the checksum match.
-    """
-    import hashlib
-    import pickle
-
-    from airspace_sim import registry
-    from airspace_sim.world import World
+    """:func:`airspace_sim.world.checkpoint.load`, its errors naming ``--resume``."""
+    from airspace_sim.world import checkpoint
 
     try:
-        with open(path, "rb") as f:
-            header = _read_header(path, f)
-            blob = f.read(header["world_bytes"] + 1)
-    except FileNotFoundError:
-        raise UserError(f"--resume {path}: no such file") from None
-    except IsADirectoryError:
-        raise UserError(f"--resume {path}: is a folder, not a checkpoint") from None
-    except OSError as exc:
-        raise UserError(f"--resume {path}: cannot read: {exc}") from None
-    if len(blob) != header["world_bytes"]:
-        raise UserError(
-            f"--resume {path}: truncated or damaged checkpoint "
-            f"({len(blob)} bytes of world data, expected {header['world_bytes']})"
-        )
-    if hashlib.sha256(blob).hexdigest() != header["world_sha256"]:
-        raise UserError(f"--resume {path}: damaged checkpoint (checksum mismatch)")
-    other_code = header["code"] != code_fingerprint()
-    if other_code:
-        print(
-            f"airspace-sim: warning: {path} was saved by other airspace_sim code; the resumed "
-            f"run may differ from an uninterrupted one",
-            file=sys.stderr,
-        )
-    registry.names("tracker")  # plugins first: a pickled world may refer to plugin classes
-    try:
-        world = pickle.loads(blob)
-    except Exception as exc:  # noqa: BLE001 - e.g. a class that other code renamed
-        first = (str(exc).strip().splitlines() or [""])[0]
-        raise UserError(
-            f"--resume {path}: cannot load the saved world"
-            + (" (saved by other airspace_sim code)" if other_code else "")
-            + f": {type(exc).__name__}: {first}"
-        ) from None
-    if not isinstance(world, World):
-        raise UserError(f"--resume {path}: holds a {type(world).__name__}, not a World")
-    return world, header["meta"]
+        return checkpoint.load(path)
+    except UserError as exc:
+        raise UserError(f"--resume {exc}") from None
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM during a run: handled like Ctrl-C (the checkpoint is saved), exit 128 + 15."""
+
+    exit_status = 128 + 15
+
+
+class _SigtermFlag:
+    """While active, SIGTERM only sets :attr:`received`; the run loop checks it between
+    steps. (Raising from the handler could land inside a library's ``__del__``, where the
+    exception is ignored and the signal lost.)"""
+
+    def __init__(self):
+        self.received = False
+        self._previous = None
+
+    def __enter__(self):
+        import signal
+        import threading
+
+        if threading.current_thread() is threading.main_thread():
+            self._previous = signal.signal(signal.SIGTERM, self._handle)
+        return self
+
+    def _handle(self, signum, frame):
+        self.received = True
+
+    def __exit__(self, *exc):
+        import signal
+
+        if self._previous is not None:
+            signal.signal(signal.SIGTERM, self._previous)
 
 
 # --------------------------------------------------------------------------- command
@@ -413,22 +322,9 @@ def run(args) -> int:
                 description = scenarios.load(name).description
             except UserError as exc:  # list the others anyway
                 description = f"(invalid: {exc})"
-            print(f"{name:<18} {description}")
+            print(f"{name:<18} {escape(description)}")
         return 0
-    if (args.gif or args.mp4) and not args.render:
-        raise UserError(
-            f"--{'gif' if args.gif else 'mp4'} needs --render DIR (the frames go there)"
-        )
-
-    if args.checkpoint_every and not args.checkpoint:
-        raise UserError("--checkpoint-every needs --checkpoint PATH")
-    if args.checkpoint:
-        target = Path(args.checkpoint)
-        if target.is_dir() or (target.exists() and not is_checkpoint(target)):
-            raise UserError(
-                f"--checkpoint {target}: exists and is not an airspace-sim checkpoint; "
-                "not overwriting it"
-            )
+    _check_options(args)
 
     if args.resume:
         if args.overrides or args.seed is not None:
@@ -490,7 +386,8 @@ def run(args) -> int:
         }
 
     start_step = world.step_count
-    interrupted = False
+    interrupted: KeyboardInterrupt | None = None
+    failed: UserError | None = None  # a frame that could not be written: save, then report
     t0 = time.perf_counter()
     bar = tqdm(
         total=steps,
@@ -500,26 +397,63 @@ def run(args) -> int:
         file=sys.stderr,
         leave=False,
     )
-    try:
-        for k in range(steps):
-            world.step()
-            everybody_left = not world.active.any()  # nothing more to see: stop early
-            if frames is not None and (
-                (k + 1) % args.every == 0 or k + 1 == steps or everybody_left
-            ):
-                frames.add(world.snapshot())
-            bar.update(1)
-            if args.checkpoint_every and (k + 1) % args.checkpoint_every == 0 and k + 1 < steps:
-                save_checkpoint(Path(args.checkpoint), world, checkpoint_meta())
-            if everybody_left:
-                break
-    except KeyboardInterrupt:
-        interrupted = True
-    finally:
-        bar.close()
-    wall = time.perf_counter() - t0
-    done = world.step_count - start_step
+    with _SigtermFlag() as sigterm:
+        try:
+            for k in range(steps):
+                if sigterm.received:
+                    raise Terminated
+                world.step()
+                everybody_left = not world.active.any()  # nothing more to see: stop early
+                if frames is not None and (
+                    (k + 1) % args.every == 0 or k + 1 == steps or everybody_left
+                ):
+                    frames.add(world.snapshot())
+                bar.update(1)
+                if args.checkpoint_every and (k + 1) % args.checkpoint_every == 0 and k + 1 < steps:
+                    save_checkpoint(Path(args.checkpoint), world, checkpoint_meta())
+                if everybody_left:
+                    break
+        except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM (Terminated)
+            interrupted = exc
+        except UserError as exc:
+            if not args.checkpoint or frames is None or not str(exc).startswith("--render"):
+                raise
+            failed = exc
+        finally:
+            bar.close()
+        wall = time.perf_counter() - t0
+        stopped = interrupted or failed
+        # a SIGTERM while the outputs are written waits for them, then ends the run
+        status = _finish(
+            args,
+            world,
+            frames,
+            name,
+            source,
+            seed,
+            overrides,
+            start_step,
+            wall,
+            checkpoint_meta(),
+            stopped,
+        )
+        if sigterm.received and stopped is None:
+            raise Terminated
+        return status
 
+
+def _finish(
+    args, world, frames, name, source, seed, overrides, start_step, wall, meta, stopped
+) -> int:
+    """Summarise, write the outputs and save the checkpoint of a run that ended (finished,
+    interrupted or ``stopped`` by a failed frame write); re-raise what stopped it."""
+    done = world.step_count - start_step
+    if args.checkpoint:  # first: the outputs below may fail on the same full disk
+        if stopped is None:  # finished (or everybody left): resuming needs --steps
+            meta = {**meta, "total_steps": world.step_count}
+        save_checkpoint(Path(args.checkpoint), world, meta)
+    if isinstance(stopped, UserError):
+        raise UserError(f"{stopped}; checkpoint (step {world.step_count}) in {args.checkpoint}")
     video = frames.close() if frames is not None else None
     summary = {
         "scenario": name,
@@ -532,7 +466,7 @@ def run(args) -> int:
         "simulated_time": float(world.time),
         "wall_time": round(wall, 3),
         "steps_per_second": round(done / wall, 1) if wall > 0 else None,
-        "interrupted": interrupted,
+        "interrupted": stopped is not None,
         "all_left": not bool(world.active.any()),
         "metrics": jsonable(world.metrics()),
     }
@@ -544,10 +478,6 @@ def run(args) -> int:
     if args.json:
         _write_json(Path(args.json), summary)
     if args.checkpoint:
-        meta = checkpoint_meta()
-        if not interrupted:  # finished (or everybody left): resuming needs --steps
-            meta["total_steps"] = world.step_count
-        save_checkpoint(Path(args.checkpoint), world, meta)
         summary["checkpoint"] = str(args.checkpoint)
     if not args.quiet:
         print(format_table(summary))
@@ -558,6 +488,34 @@ def run(args) -> int:
             )
         if args.checkpoint:
             print(f"checkpoint (step {world.step_count}) in {args.checkpoint}")
-    if interrupted:
-        raise KeyboardInterrupt
+    if stopped is not None:
+        raise stopped
     return 0
+
+
+def _check_options(args) -> None:
+    """Option combinations and every output location, checked before any work."""
+    from airspace_sim.world import checkpoint
+
+    if (args.gif or args.mp4) and not args.render:
+        raise UserError(
+            f"--{'gif' if args.gif else 'mp4'} needs --render DIR (the frames go there)"
+        )
+    if args.checkpoint_every and not args.checkpoint:
+        raise UserError("--checkpoint-every needs --checkpoint PATH")
+    if args.checkpoint:
+        target = Path(args.checkpoint)
+        if target.is_dir() or (target.exists() and not checkpoint.is_checkpoint(target)):
+            raise UserError(
+                f"--checkpoint {target}: exists and is not an airspace-sim checkpoint; "
+                "not overwriting it"
+            )
+        check_output("--checkpoint", target)
+        try:
+            checkpoint.load_key(create=True)  # now, not when the first save is due
+        except UserError as exc:
+            raise UserError(f"--checkpoint {target}: {exc}") from None
+    if args.json:
+        check_output("--json", args.json)
+    if args.render:
+        check_output("--render", args.render, folder=True)

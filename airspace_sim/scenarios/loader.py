@@ -122,7 +122,7 @@ def _range(
     else:
         what = f"an {noun}" if integer else f"a {noun}"
     if hi is not None:
-        what += f" up to {hi:g}"
+        what += f" up to {hi}" if integer else f" up to {hi:g}"
     if unit:
         what += f" ({unit})"
 
@@ -144,7 +144,10 @@ def _points(limit: float) -> Callable[[Any], str | None]:
     def check(value):
         return None if ok(value) else f"expected coordinates within ±{limit:g} m"
 
-    return check  # no ``what``: a wrong shape keeps its type message
+    check.limit = (
+        f"coordinates within ±{limit:g} m"  # no ``what``: a wrong shape keeps its type message
+    )
+    return check
 
 
 def _params_range(meta, tp) -> Callable[[Any], str | None] | None:
@@ -165,11 +168,20 @@ def _params_range(meta, tp) -> Callable[[Any], str | None] | None:
 MAX_DISTANCE_M = 1e7  #: ranges, radii, sectors: 10 000 km
 MAX_COORDINATE_M = 1e8  #: positions and waypoints
 MAX_SPEED = 1000.0  #: m/s (about Mach 3)
+#: m/s: slower is not flight, and a speed of 5e-324 m/s made path metrics 0 / 0
+MIN_SPEED = 1.0
 MAX_TIME_S = 1e7  #: durations and time constants: about 4 months
 MAX_LOOKAHEAD_S = 3600.0
 MAX_STEPS = 10_000_000  #: duration / dt
 MAX_AIRCRAFT = 10_000  #: generated traffic (the track table grows as N²)
 MAX_PROBABILITY_SAMPLES = 1000
+MIN_DT_S = 1e-3  #: a shorter step only multiplies the work; 5e-324 overflowed duration / dt
+MAX_HEADING_DEG = 360.0  #: headings within ±360° (one turn either way)
+#: Estimated bytes of one track (IMM filter state of every mode plus bookkeeping; measured
+#: with tracemalloc on a ring whose aircraft all see each other, docs/bad-input.md).
+TRACK_BYTES = 5 * 1024
+#: Fraction of the machine's physical memory the worst-case track table may take.
+MEMORY_FRACTION = 0.5
 
 POSITIVE = _range(0, lo_open=True)
 NON_NEGATIVE = _range(0)
@@ -184,7 +196,7 @@ TURN_PREFERENCES = ("right", "nearest", "none")
 RANGES: dict[str, Callable[[Any], str | None]] = {
     "Scenario.name": NON_EMPTY,
     "Scenario.seed": _range(0, 2**63 - 1, integer=True),
-    "Scenario.dt": _range(0, 60.0, lo_open=True, unit="s"),
+    "Scenario.dt": _range(MIN_DT_S, 60.0, unit="s"),
     "Scenario.duration": _range(0, MAX_TIME_S, lo_open=True, unit="s"),
     "Scenario.model": _one_of(_preset_names),
     "Separation.r_safe": _range(0, 1e6, lo_open=True, unit="m"),
@@ -211,7 +223,8 @@ RANGES: dict[str, Callable[[Any], str | None]] = {
     "AircraftSpec.id": NON_EMPTY,
     "AircraftSpec.position": _points(MAX_COORDINATE_M),
     "AircraftSpec.waypoints": _points(MAX_COORDINATE_M),
-    "AircraftSpec.speed": _range(0, MAX_SPEED, lo_open=True, unit="m/s"),
+    "AircraftSpec.heading_deg": _range(-MAX_HEADING_DEG, MAX_HEADING_DEG, unit="deg"),
+    "AircraftSpec.speed": _range(MIN_SPEED, MAX_SPEED, unit="m/s"),
     "AircraftSpec.autopilot": _one_of_registry("autopilot"),
     "AircraftSpec.max_turn_rate_deg": _range(0, 3600.0, unit="deg/s"),
     "TrafficSpec.pattern": _one_of(TRAFFIC_PATTERNS),
@@ -219,12 +232,41 @@ RANGES: dict[str, Callable[[Any], str | None]] = {
     "TrafficSpec.radius": _range(0, MAX_DISTANCE_M, lo_open=True, unit="m"),
     "TrafficSpec.sector": _range(0, MAX_DISTANCE_M, lo_open=True, unit="m"),
     "TrafficSpec.spawn_clear_s": _range(0, MAX_LOOKAHEAD_S, unit="s"),
-    "TrafficSpec.speed": _range(0, MAX_SPEED, lo_open=True, unit="m/s"),
+    "TrafficSpec.speed": _range(MIN_SPEED, MAX_SPEED, unit="m/s"),
     "TrafficSpec.speed_spread": _range(0, MAX_SPEED, unit="m/s"),
     "TrafficSpec.autopilot": _one_of_registry("autopilot"),
     "TrafficSpec.max_turn_rate_deg": _range(0, 3600.0, unit="deg/s"),
     "TrafficSpec.controlled": NON_NEGATIVE_INT,
 }
+
+
+def ranges_table() -> str:
+    """The markdown table of every number's range in :data:`RANGES`, by dotted key
+    (``aircraft[].speed``): what scenarios/README.md shows (a test keeps them equal)."""
+    rows = ["| key | range |", "| --- | --- |"]
+
+    def walk(cls, prefix):
+        hints = _hints(cls)
+        for f in dataclasses.fields(cls):
+            if (cls.__name__, f.name) in INTERNAL_FIELDS:
+                continue
+            tp = hints[f.name]
+            key = f"{prefix}{f.name}"
+            inner = [a for a in typing.get_args(tp) if dataclasses.is_dataclass(a)]
+            if dataclasses.is_dataclass(tp) or inner:
+                walk(
+                    tp if dataclasses.is_dataclass(tp) else inner[0],
+                    key + ("[]." if inner else "."),
+                )
+                continue
+            check = RANGES.get(f"{cls.__name__}.{f.name}")
+            what = getattr(check, "what", None) or getattr(check, "limit", None)
+            numeric = {float, int} & {tp, *typing.get_args(tp)} or "float" in repr(tp)
+            if numeric and tp is not bool:
+                rows.append(f"| `{key}` | {what or 'any'} |")
+
+    walk(Scenario, "")
+    return "\n".join(rows)
 
 
 # --------------------------------------------------------------------------- conversion
@@ -417,6 +459,13 @@ def build_dataclass(cls, table: Any, path: str = ""):
 
 def check_scenario(sc: Scenario) -> None:
     """Checks that involve several fields; raises :class:`Invalid`."""
+    n = len(sc.aircraft) + sc.traffic.count
+    if n > MAX_AIRCRAFT:
+        raise Invalid(
+            "aircraft",
+            f"expected at most {MAX_AIRCRAFT} aircraft in all, got {len(sc.aircraft)} "
+            f"+ traffic.count {sc.traffic.count}",
+        )
     ids = [a.id for a in sc.aircraft]
     for i, aid in enumerate(ids):
         if aid in ids[:i]:
@@ -468,16 +517,57 @@ def check_scenario(sc: Scenario) -> None:
             "traffic.pattern",
             f"expected ring, random or encounter with count {t.count}, got 'none'",
         )
-    if t.speed_spread >= t.speed:
+    if t.speed - t.speed_spread < MIN_SPEED:
         raise Invalid(
             "traffic.speed_spread",
-            f"expected less than traffic.speed ({t.speed:g} m/s), got {t.speed_spread:g}",
+            f"expected at most traffic.speed − {MIN_SPEED:g} m/s ({t.speed - MIN_SPEED:g} m/s: "
+            f"generated speeds stay ≥ {MIN_SPEED:g} m/s), got {t.speed_spread:g}",
         )
     if t.pattern == "encounter" and not sc.aircraft:
         raise Invalid(
             "traffic.pattern",
             "expected an aircraft[0] (the ownship) for pattern 'encounter', got none",
         )
+    _check_memory(sc)
+
+
+def physical_memory_bytes() -> int | None:
+    """The machine's physical memory in bytes, or None where the OS does not say."""
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def track_table_bytes(sc: Scenario) -> int:
+    """Worst-case bytes of the scenario's track table: every tracking aircraft (avoiding or
+    an RL agent; generated traffic avoids unless the encounter pattern makes it
+    non-cooperative) holding a track on every other aircraft, :data:`TRACK_BYTES` each."""
+    n = len(sc.aircraft) + sc.traffic.count
+    trackers = sum(a.avoid or a.controlled for a in sc.aircraft)
+    if sc.traffic.pattern != "encounter":
+        trackers += sc.traffic.count
+    else:
+        trackers += sc.traffic.controlled
+    return trackers * max(n - 1, 0) * TRACK_BYTES
+
+
+def _check_memory(sc: Scenario) -> None:
+    """Refuse, before anything is allocated, a scenario whose worst-case track table would
+    not fit in :data:`MEMORY_FRACTION` of physical memory (``traffic.count = 10**9`` once
+    tried to allocate 15 GiB and died)."""
+    need = track_table_bytes(sc)
+    total = physical_memory_bytes()
+    if total is None or need <= MEMORY_FRACTION * total:
+        return
+    key = "traffic.count" if sc.traffic.count else "aircraft"
+    got = sc.traffic.count if sc.traffic.count else len(sc.aircraft)
+    raise Invalid(
+        key,
+        f"expected fewer aircraft: {len(sc.aircraft) + sc.traffic.count} aircraft may need "
+        f"{need / 2**30:.1f} GiB of tracks (every tracking aircraft tracking every other), "
+        f"more than {MEMORY_FRACTION:.0%} of this machine's {total / 2**30:.1f} GiB; got {got}",
+    )
 
 
 # --------------------------------------------------------------------------- part parameters
@@ -615,6 +705,8 @@ def parse_toml(text: str, source: str) -> dict:
     """Parse TOML; a syntax error becomes one line with file, line and column."""
     try:
         return tomllib.loads(text)
+    except RecursionError:
+        raise UserError(f"{source}: invalid TOML: arrays or tables nested too deeply") from None
     except tomllib.TOMLDecodeError as exc:
         msg = str(exc)
         m = _LINE_COL.search(msg)
@@ -629,12 +721,29 @@ def parse_toml(text: str, source: str) -> dict:
 
 
 def from_dict(
-    data: dict, source: str = "<memory>", overrides: Iterable[str] = (), name: str | None = None
+    data: dict,
+    source: str = "<memory>",
+    overrides: Iterable[str] = (),
+    name: str | None = None,
+    *,
+    runnable: bool = False,
 ) -> Scenario:
-    """Validate a TOML-like dict (after applying ``overrides``) into a :class:`Scenario`."""
+    """Validate a TOML-like dict (after applying ``overrides``) into a :class:`Scenario`.
+
+    With ``runnable`` (what :func:`load` asks for a scenario file) a table with no keys, or
+    a scenario with no aircraft and no traffic, is refused: there is nothing to simulate.
+    Without it such a scenario is a configuration code builds (defaults, a resolver's
+    parameters)."""
     import copy
 
-    data = copy.deepcopy(data)
+    if runnable and not data:
+        raise UserError(
+            f"{source}: empty scenario: expected [[aircraft]] tables or a [traffic] table"
+        )
+    try:
+        data = copy.deepcopy(data)
+    except RecursionError:  # a dict built in Python; a file's nesting is caught by parse_toml
+        raise UserError(f"{source}: values nested too deeply") from None
     set_paths = apply_overrides(data, overrides)
     if name is not None:
         data.setdefault("name", name)
@@ -645,6 +754,11 @@ def from_dict(
         check_parts(sc)
     except Invalid as exc:
         raise UserError(_where(exc, source, set_paths)) from None
+    if runnable and not sc.aircraft and sc.traffic.count == 0:
+        raise UserError(
+            f"{source}: aircraft: expected at least one aircraft ([[aircraft]] tables or "
+            "[traffic] with a count), got none: nothing to simulate"
+        )
     return sc
 
 
@@ -668,4 +782,4 @@ def load(name_or_path: str | os.PathLike, overrides: Iterable[str] = ()) -> Scen
     except (OSError, UnicodeDecodeError) as exc:
         raise UserError(f"{source}: cannot read: {exc}") from None
     data = parse_toml(text, source)
-    return from_dict(data, source, overrides, name=path.stem)
+    return from_dict(data, source, overrides, name=path.stem, runnable=True)

@@ -57,7 +57,11 @@ def parse(item: str) -> tuple[list[str | int], Any]:
     if "=" not in item:
         raise UserError(f"--set {item}: expected key=value, e.g. traffic.count=64")
     key, _, value = item.partition("=")
-    return parse_key(key.strip()), parse_value(value)
+    parts = parse_key(key.strip())
+    try:
+        return parts, parse_value(value)
+    except RecursionError:
+        raise UserError(f"--set {key.strip()}: value nested too deeply") from None
 
 
 def apply_overrides(data: dict, overrides: Iterable[str]) -> list[str]:
