@@ -384,13 +384,12 @@ class AirspaceParallelEnv(ParallelEnv):
         if self._renderer is not None:
             self._renderer.reset()
         obs = self._observe_all(self.agents)
-        infos = {}
+        idx = np.array([self._index[a] for a in self.agents], dtype=np.int64)
+        infos = self._infos(self.agents, idx)
         zero = rw.weighted_terms(self.reward_weights, {})
-        for a in self.agents:
-            info = self._base_info(a)
+        for info in infos.values():
             info["reward_terms"] = dict(zero)
             info["arrived"] = False
-            infos[a] = info
         return obs, infos
 
     # ------------------------------------------------------------------ step
@@ -450,18 +449,22 @@ class AirspaceParallelEnv(ParallelEnv):
             "arrival": done.astype(float),
         }
         truncated = self.num_cycles >= self.max_cycles
-        rewards, terms, truncs, infos = {}, {}, {}, {}
         wts = self.reward_weights
+        names = list(rw.DEFAULT_WEIGHTS)
+        weighted = np.stack([wts[n] * values[n] for n in names], axis=1)  # (A, terms)
+        total = weighted.sum(axis=1).tolist()
+        weighted = weighted.tolist()
+        ended = (nmac | done | ~w.active[idx]).tolist()
+        infos = self._infos(acting, idx)
+        rewards, terms, truncs = {}, {}, {}
         for k, a in enumerate(acting):
-            t = {name: float(wts[name] * values[name][k]) for name in rw.DEFAULT_WEIGHTS}
-            rewards[a] = float(sum(t.values()))
-            terms[a] = bool(nmac[k] or done[k] or not w.active[idx[k]])
-            truncs[a] = bool(truncated and not terms[a])
-            info = self._base_info(a)
-            info["reward_terms"] = t
+            rewards[a] = total[k]
+            terms[a] = ended[k]
+            truncs[a] = truncated and not ended[k]
+            info = infos[a]
+            info["reward_terms"] = dict(zip(names, weighted[k]))
             info["arrived"] = bool(done[k])
             info["separation_m"] = float(nearest[k])
-            infos[a] = info
         obs = self._observe_all(acting)
         self.agents = [a for a in acting if not (terms[a] or truncs[a])]
         if self.ended == "leave":
@@ -536,17 +539,29 @@ class AirspaceParallelEnv(ParallelEnv):
         obs = sp.finish(lay, own, intr)
         return {a: obs[k] for k, a in enumerate(agents)}
 
-    def _base_info(self, a) -> dict[str, Any]:
+    def _infos(self, agents, idx) -> dict[str, dict[str, Any]]:
+        """Per-agent info dicts: time s, step, conflict, in_los, nmac, advice rad,
+        waypoint_index (the caller adds reward terms)."""
         w = self.world
-        i = self._index[a]
+        time, step = float(w.time), int(w.step_count)
+        cols = zip(
+            w.conflict[idx].tolist(),
+            w.in_los[idx].tolist(),
+            w.nmac[idx].tolist(),
+            w.advice[idx].tolist(),
+            self._route[0][idx].tolist(),
+        )
         return {
-            "time": float(w.time),
-            "step": int(w.step_count),
-            "conflict": bool(w.conflict[i]),
-            "in_los": bool(w.in_los[i]),
-            "nmac": bool(w.nmac[i]),
-            "advice": float(w.advice[i]),
-            "waypoint_index": int(self._route[0][i]),
+            a: {
+                "time": time,
+                "step": step,
+                "conflict": c,
+                "in_los": los,
+                "nmac": nm,
+                "advice": adv,
+                "waypoint_index": wp,
+            }
+            for a, (c, los, nm, adv, wp) in zip(agents, cols)
         }
 
     # ---------------------------------------------------------------- render

@@ -61,6 +61,7 @@ accepts) in 0..5.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -140,10 +141,16 @@ class ObservationLayout:
         return out
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(size,) float32 lower and upper bounds (read-only arrays, built once)."""
+        return self._bounds
+
+    @functools.cached_property
+    def _bounds(self) -> tuple[np.ndarray, np.ndarray]:
         ilow = INTRUDER_LOW + (0,) * self.n_modes
         ihigh = INTRUDER_HIGH + (1,) * self.n_modes
         low = np.array(OWN_LOW + ilow * self.n_intruders, dtype=np.float32)
         high = np.array(OWN_HIGH + ihigh * self.n_intruders, dtype=np.float32)
+        low.flags.writeable = high.flags.writeable = False
         return low, high
 
     def space(self) -> spaces.Box:
@@ -323,12 +330,12 @@ def encode_intruders_batch(
 
 
 def finish(layout: ObservationLayout, own: np.ndarray, intruders: np.ndarray) -> np.ndarray:
-    """Concatenate own (..., 12) and intruder (..., K, F) blocks, NaN -> 0, clip into the
+    """Concatenate own (..., 14) and intruder (..., K, F) blocks, NaN -> 0, clip into the
     space's bounds; float32 (..., size)."""
     own = np.asarray(own, np.float64)
     intruders = np.asarray(intruders, np.float64)
     lead = own.shape[:-1]
     obs = np.concatenate([own, intruders.reshape(lead + (-1,))], axis=-1)
-    obs = np.nan_to_num(obs, nan=0.0, posinf=np.inf, neginf=-np.inf)
+    obs[np.isnan(obs)] = 0.0
     low, high = layout.bounds()
-    return np.clip(obs, low, high).astype(np.float32)
+    return np.clip(obs, low, high, out=obs).astype(np.float32)
