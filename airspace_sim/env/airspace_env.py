@@ -439,13 +439,13 @@ class AirspaceParallelEnv(ParallelEnv):
             "los": -rw.severity(nearest, w.r_safe, w.nmac_distance),
             "nmac": np.where(
                 nmac,
-                rw.nmac_value(self.reward_weights, self.max_cycles - self.num_cycles, c_max),
+                rw.nmac_value(self.reward_weights, self.max_cycles - self.num_cycles + 1, c_max),
                 0,
             ),
             "conflict": -w.conflict[idx].astype(float),
             "heading_change": -(turn**2),
             "progress": np.where(has_route, gained / Ls, 0.0),
-            "path": np.where(has_route, -np.maximum(travel - gained / Ls, 0.0), 0.0),
+            "path": np.where(has_route, gained / Ls - travel, 0.0),
             "arrival": done.astype(float),
         }
         truncated = self.num_cycles >= self.max_cycles

@@ -11,28 +11,33 @@ term               value per step
                    ``(r_safe - d) / (r_safe - d_nmac)`` clipped to [0, 1], d the distance to
                    the nearest aircraft (0 outside r_safe, 1 at the NMAC distance)
 ``nmac``           on the step of a near mid-air collision only (the agent's episode ends):
-                   ``-(1 + (T - t) · c_max / w_nmac)``, see below
+                   ``-(1 + (T - t + 1) · c_max / w_nmac)``, see below
 ``conflict``       -1 while the ownship's resolver raises a conflict alert
 ``heading_change`` -(commanded turn rate / turn-rate limit)²
 ``progress``       route length gained this step / L (sums to 1 over a whole route: a
                    potential-based term, it does not change which policy is optimal)
-``path``           -(metres flown - route length gained) / L, ≤ 0 (sums to minus the extra
-                   path as a fraction of the route; the same units as ``progress``)
+``path``           -(metres flown - route length gained) / L (sums to minus the extra path
+                   as a fraction of the route; the same units as ``progress``); ≥ -2 v dt / L,
+                   positive only on a step whose waypoint capture (the route autopilot's
+                   "abeam" rule) shortens the remaining route by more than a step's travel
 ``arrival``        +1 on reaching the last waypoint (the agent's episode ends)
 =================  =========================================================================
 
 Agents without a route (Markov or straight autopilots) get 0 for ``progress``, ``path`` and
 ``arrival``.
 
-**No collision pays.** Every term but ``nmac`` is bounded per step:
-``|r_t| ≤ c_max = w_los + w_conflict + w_heading_change + (w_progress + 2 w_path) · v dt / L``
-(progress loses at most one step's travel, the path term at most two). An NMAC at step ``t``
-of a ``T``-step episode (``max_cycles``) costs ``w_nmac + (T - t) · c_max``: more than the
-worst any continuation of the same episode could collect without colliding, even one in
-loss of separation at the NMAC distance every remaining step. So for any policy that
-collides there is a policy with the same history that avoids and earns more (any
-avoiding continuation), whatever the weights (non-negative, ``w_nmac`` > 0). ``tests/test_env_rewards.py``
-checks it with fixed policies on rings.
+**No collision pays.** Every term but ``nmac`` and the bonuses (``progress`` gained,
+``arrival``) is a penalty bounded per step, so every step's reward without an NMAC is at
+least ``-c_max``, ``c_max = w_los + w_conflict + w_heading_change + (w_progress + 2 w_path)
+· v dt / L`` (progress loses at most one step's travel, the path term at most two). An NMAC
+on step ``t`` (1-based) of a ``T``-step episode (``max_cycles``) costs ``w_nmac + (T - t +
+1) · c_max``: more than the worst that step and every later one could cost an agent that
+does not collide, even one at the NMAC distance, in loss of separation, every remaining
+step. So a policy that collides at ``t`` earns less than any policy with the same history
+that avoids from ``t`` on (the colliding step's own gain is at most ``w_progress · v dt / L``
+< ``w_nmac``), whatever the weights (non-negative, ``w_nmac`` > 0).
+``tests/test_env_rewards.py`` checks the bound on every step and the order of fixed
+policies (straight, random, built-in resolver) on rings.
 """
 
 from __future__ import annotations
@@ -81,7 +86,8 @@ def merge_weights(weights: dict | None) -> dict[str, float]:
 
 
 def step_bound(weights: dict[str, float], travel_fraction) -> np.ndarray:
-    """``c_max`` per agent: the largest |reward| of one step without an NMAC.
+    """``c_max`` per agent: the largest penalty (negative reward) of one step without an
+    NMAC.
 
     travel_fraction : (A,) ``v · dt / L`` of each agent (0 without a route).
     """
@@ -92,8 +98,9 @@ def step_bound(weights: dict[str, float], travel_fraction) -> np.ndarray:
 
 def nmac_value(weights: dict[str, float], steps_left, c_max) -> np.ndarray:
     """The ``nmac`` term's value (before weighting) on the step of an NMAC, with
-    ``steps_left`` = T - t steps of the episode forgone: ``-(1 + steps_left · c_max /
-    w_nmac)``, so that weighted it costs ``w_nmac + steps_left · c_max``."""
+    ``steps_left`` = T - t + 1 steps of the episode (this one included):
+    ``-(1 + steps_left · c_max / w_nmac)``, so that weighted it costs ``w_nmac +
+    steps_left · c_max``."""
     steps_left = np.maximum(np.asarray(steps_left, float), 0.0)
     return -(1.0 + steps_left * c_max / weights["nmac"])
 
