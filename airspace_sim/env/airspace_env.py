@@ -412,9 +412,7 @@ class AirspaceParallelEnv(ParallelEnv):
         w = self.world
         acting = list(self.agents)
         idx = np.array([self._index[a] for a in acting], dtype=np.int64)
-        frac = np.array(
-            [sp.decode_action(a, actions.get(a), self.discrete_actions) for a in acting]
-        )
+        frac = self._decode(acting, actions)
         rates = np.full(w.n, np.nan)
         rates[idx] = frac * w.max_turn_rate[idx]
         w.step(rates)
@@ -474,6 +472,21 @@ class AirspaceParallelEnv(ParallelEnv):
         if self.render_mode == "human":
             self.render()
         return obs, rewards, terms, truncs, infos
+
+    def _decode(self, acting, actions) -> np.ndarray:
+        """(A,) turn fractions (NaN: built-in) of the acting agents' actions. The common
+        case, one float array of shape (1,) per agent as vector envs send, is checked in
+        one go; anything else goes through :func:`.spaces.decode_action` one by one."""
+        got = [actions.get(a) for a in acting]
+        if not self.discrete_actions and all(
+            type(g) is np.ndarray and g.shape == (1,) and g.dtype.kind == "f" for g in got
+        ):
+            frac = np.concatenate(got).astype(np.float64) if got else np.zeros(0)
+            if np.isfinite(frac).all():
+                return np.clip(frac, -1.0, 1.0)
+        return np.array(
+            [sp.decode_action(a, g, self.discrete_actions) for a, g in zip(acting, got)]
+        )
 
     def _nearest(self, idx) -> np.ndarray:
         """(len(idx),) m from each of these aircraft to the nearest aircraft in loss of

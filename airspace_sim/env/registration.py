@@ -24,8 +24,8 @@ VERSION = 0
 R_SAFE_M = 3000.0  #: the shipped ring and dense scenarios' r_safe
 
 
-def _ring(n: int) -> dict:
-    """``ring`` with n aircraft, all agents; radius drawn in [R, R + 10 km] with R at least
+def ring_kwargs(n: int) -> dict:
+    """Env keyword arguments of ``ring`` with n aircraft (any n ≥ 2), all agents; radius drawn in [R, R + 10 km] with R at least
     15 km and 15% above the ring's minimum, phase in [0, 360)°, speeds in [210, 250] m/s,
     start delays in [0, 10] s, heading offsets ±5°; long enough for the slowest to cross."""
     r_min = R_SAFE_M / math.sin(math.pi / n)
@@ -48,7 +48,7 @@ def _ring(n: int) -> dict:
     )
 
 
-def _dense(n: int) -> dict:
+def dense_kwargs(n: int) -> dict:
     """``dense_random`` with n aircraft, all agents, at its density (60 in 100 km × 100 km:
     6 per 1000 km²); the seed draws positions and routes, as for every random sector."""
     side = 100_000.0 * math.sqrt(n / 60.0)
@@ -61,8 +61,8 @@ def _dense(n: int) -> dict:
 
 #: Multi-agent ids (``airspace_sim/<name>-v0``) → the keyword arguments they stand for.
 MULTI_AGENT = {
-    **{f"ring{n}": _ring(n) for n in (4, 8, 16, 32)},
-    **{f"dense{n}": _dense(n) for n in (8, 16, 32)},
+    **{f"ring{n}": ring_kwargs(n) for n in (4, 8, 16, 32)},
+    **{f"dense{n}": dense_kwargs(n) for n in (8, 16, 32)},
 }
 
 
