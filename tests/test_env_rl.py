@@ -223,3 +223,9 @@ def test_ended_agents_can_leave_the_world():
     w = env.world
     assert not w.active.any() and not w.in_los.any() and not w.nmac.any()
     assert env.step({}) == ({}, {}, {}, {}, {})  # what black_death_v3 calls once more
+
+
+def test_pettingzoo_parallel_api_test_on_a_multi_agent_ring():
+    from pettingzoo.test import parallel_api_test
+
+    parallel_api_test(aenv.make("ring4", max_cycles=20), num_cycles=25)
