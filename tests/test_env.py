@@ -125,7 +125,8 @@ def test_spaces_built_once_and_layout():
     assert np.all(np.isfinite(env.observation_space("west").low))
     assert np.all(np.isfinite(env.observation_space("west").high))
     box = env.action_space("west")
-    assert box.shape == (1,) and np.isclose(box.high[0], np.radians(3.0))
+    # normalised: a fraction of the turn-rate limit
+    assert box.shape == (1,) and box.low[0] == -1.0 and box.high[0] == 1.0
 
 
 def test_observations_stay_in_space_every_step():
@@ -185,7 +186,7 @@ def test_other_bad_inputs_are_user_errors():
 
 def test_discrete_actions_turn_the_right_way():
     env = par(discrete_actions=True, overrides=["resolver.kind=none"])
-    assert env.action_space("west").n == len(DISCRETE_LEVELS) == 5
+    assert env.action_space("west").n == len(DISCRETE_LEVELS) + 1 == 6
     env.reset(seed=0)
     h0 = env.world.headings.copy()
     i_w, i_e = env.world.ids.index("west"), env.world.ids.index("east")
@@ -215,8 +216,16 @@ def test_nmac_terminates_and_is_penalised():
             assert (a in env.agents) == (not term[a] and not trunc[a])
     assert set(ended) == {"west", "east"}
     for info, r in ended.values():
-        assert info["nmac"] and info["reward_terms"]["nmac"] == -aenv.DEFAULT_WEIGHTS["nmac"]
-        assert info["reward_terms"]["los"] < 0 and r < -aenv.DEFAULT_WEIGHTS["nmac"]
+        # the NMAC costs w_nmac plus the worst the rest of the episode could have cost
+        steps_left = 200 - info["step"]
+        assert steps_left > 50
+        assert info["nmac"] and info["reward_terms"]["nmac"] < -aenv.DEFAULT_WEIGHTS["nmac"]
+        assert info["reward_terms"]["nmac"] <= -(
+            aenv.DEFAULT_WEIGHTS["nmac"] + steps_left * aenv.DEFAULT_WEIGHTS["los"]
+        )
+        # an NMAC is the worst intrusion: severity 1
+        assert info["reward_terms"]["los"] == -aenv.DEFAULT_WEIGHTS["los"]
+        assert r < -aenv.DEFAULT_WEIGHTS["nmac"]
 
 
 def test_arrival_terminates_with_bonus_and_weights_apply():
@@ -306,7 +315,7 @@ def test_agent_without_a_route_has_no_waypoint_terms(autopilot):
         o = obs["west"]
         assert o[names.index("own.has_waypoint")] == 0.0
         assert o[names.index("own.cross_track")] == 0.0
-        assert infos["west"]["reward_terms"]["deviation"] == 0.0
+        assert infos["west"]["reward_terms"]["path"] == 0.0
         assert infos["west"]["reward_terms"]["progress"] == 0.0
         assert infos["west"]["waypoint_index"] == 0
 
@@ -392,7 +401,9 @@ def test_scenario_object_overrides_and_agent_choice():
     assert infos["ring00"]["reward_terms"]["los"] == 0.0
     # default: the scenario marks nobody, so the first aircraft is the agent
     assert aenv.parallel_env(scenario=sc).possible_agents == ["markov1"]
-    with pytest.raises(UserError, match="ring02"):
-        aenv.parallel_env(scenario=sc, agents=["ring02"])
+    # any generated aircraft can be an agent, not only the first of the traffic
+    assert aenv.parallel_env(scenario=sc, agents=["ring02"]).possible_agents == ["ring02"]
+    with pytest.raises(UserError, match="ring09"):
+        aenv.parallel_env(scenario=sc, agents=["ring09"])
     with pytest.raises(UserError, match="unknown scenario"):
         aenv.parallel_env(scenario="no_such_scenario")

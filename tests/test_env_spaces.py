@@ -15,10 +15,10 @@ LAYOUT = sp.ObservationLayout(
 
 def test_layout_names_bounds_and_space():
     lay = LAYOUT
-    assert lay.size == 12 + 3 * 14 == len(lay.names())
+    assert lay.size == 14 + 3 * 14 == len(lay.names())
     low, high = lay.bounds()
     assert low.dtype == np.float32 and np.all(low < high) and np.all(np.isfinite(high))
-    assert lay.names()[12] == "intruder0.mask" and lay.names()[-1] == "intruder2.mu2"
+    assert lay.names()[14] == "intruder0.mask" and lay.names()[-1] == "intruder2.mu2"
     assert lay.space().shape == (lay.size,)
 
 
@@ -78,23 +78,29 @@ def test_padding_non_finite_tracks_and_clipping():
     P = np.tile(np.eye(5), (2, 1, 1))
     rows = sp.encode_intruders(LAYOUT, np.zeros(2), np.zeros(2), 0.0, x, P, np.ones((2, 3)) / 3)
     assert rows[0, 0] == 1 and np.all(rows[1:] == 0)  # the NaN track is skipped
-    obs = sp.finish(LAYOUT, np.full(12, 5.0), rows)
+    obs = sp.finish(LAYOUT, np.full(14, 5.0), rows)
     assert obs.dtype == np.float32 and LAYOUT.space().contains(obs)
-    assert obs[13] == 1.0  # 1e9 m ahead clipped to 1
+    assert obs[15] == 1.0  # 1e9 m ahead clipped to 1
 
 
 def test_decode_action():
-    assert sp.decode_action("a", np.array([0.01], np.float32), 0.05, False) == pytest.approx(0.01)
-    assert sp.decode_action("a", [1.0], 0.05, False) == 0.05  # clipped to the limit
-    assert sp.decode_action("a", 0, 0.05, True) == 0.05  # hard left = CCW
-    assert sp.decode_action("a", 4, 0.05, True) == -0.05
-    assert sp.decode_action("a", np.int64(2), 0.05, True) == 0.0
+    # normalised: a fraction of the turn-rate limit, clipped to [-1, 1]
+    assert sp.decode_action("a", np.array([0.2], np.float32), False) == pytest.approx(0.2)
+    assert sp.decode_action("a", [3.0], False) == 1.0
+    assert sp.decode_action("a", -7, False) == -1.0
+    assert sp.decode_action("a", 0, True) == 1.0  # hard left = CCW
+    assert sp.decode_action("a", 4, True) == -1.0
+    assert sp.decode_action("a", np.int64(2), True) == 0.0
+    assert sp.decode_action("a", np.array(1), True) == 0.5
+    # the built-in pilot: None, or the discrete BUILTIN_ACTION
+    assert math.isnan(sp.decode_action("a", None, False))
+    assert math.isnan(sp.decode_action("a", sp.BUILTIN_ACTION, True))
     for bad in ([np.nan], [np.inf], np.array([-np.inf], np.float32)):
         with pytest.raises(UserError, match="agent 'a'"):
-            sp.decode_action("a", bad, 0.05, False)
-    with pytest.raises(UserError, match="one heading rate"):
-        sp.decode_action("a", [0.0, 0.0], 0.05, False)
-    with pytest.raises(UserError, match="0..4"):
-        sp.decode_action("a", 5, 0.05, True)
-    with pytest.raises(UserError, match="0..4"):
-        sp.decode_action("a", 1.5, 0.05, True)
+            sp.decode_action("a", bad, False)
+    with pytest.raises(UserError, match="one number"):
+        sp.decode_action("a", [0.0, 0.0], False)
+    with pytest.raises(UserError, match="0..5"):
+        sp.decode_action("a", 6, True)
+    with pytest.raises(UserError, match="0..5"):
+        sp.decode_action("a", 1.5, True)

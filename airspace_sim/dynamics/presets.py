@@ -289,14 +289,28 @@ def realistic(dt: float = 1.0) -> Preset:
 PRESETS = {"seed": seed, "realistic": realistic}
 
 
+#: (name, factory, dt) -> Preset: a world (and every env reset) asks for the same preset,
+#: and rebuilding Π = expm(Λ dt) was ~90% of a reset. Presets are frozen and hold only
+#: tuples, so sharing one is safe; the factory is part of the key so that replacing an
+#: entry of PRESETS is never served a stale preset.
+_CACHE: dict[tuple, Preset] = {}
+
+
 def get(name: str, dt: float | None = None) -> Preset:
     """The preset called ``name``; a :class:`UserError` listing the known names if unknown.
 
     ``dt`` (seconds), if given, changes the step via :meth:`Preset.with_` (continuous-time
     presets keep their behaviour in seconds; the ``seed`` preset's numbers stay per step).
+    Results are cached on every input (name, the factory behind it, dt).
     """
     try:
-        preset = PRESETS[name]()
+        factory = PRESETS[name]
     except KeyError:
         raise UserError(f"unknown preset {name!r} (known: {', '.join(sorted(PRESETS))})") from None
-    return preset if dt is None else preset.with_(dt=dt)
+    key = (name, factory, None if dt is None else float(dt))
+    preset = _CACHE.get(key)
+    if preset is None:
+        preset = factory()
+        preset = preset if dt is None else preset.with_(dt=dt)
+        _CACHE[key] = preset
+    return preset

@@ -1,21 +1,30 @@
 """The PettingZoo :class:`~pettingzoo.ParallelEnv` over :class:`airspace_sim.world.World`.
 
-Agents are the aircraft the scenario marks ``controlled``; every other aircraft is
-background traffic flown by the world's autopilots and resolver. Each agent commands a
-heading rate (rad/s) every step; see :mod:`.spaces` for the observation layout and action
-spaces and :mod:`.rewards` for the reward terms.
+Agents are the aircraft chosen by ``agents`` (the scenario's ``controlled`` marks by
+default; ``"all"``, a number or any list of ids, hand-placed or generated); every other
+aircraft is background traffic flown by the world's autopilots and resolver. Each agent
+commands a turn rate as a fraction of its turn-rate limit every step, or leaves the step to
+the built-in pilot; see :mod:`.spaces` for the observation layout and action spaces,
+:mod:`.rewards` for the reward terms and :mod:`.checks` for input errors.
 
 An agent's episode ends (``terminations``) on an NMAC, on reaching its route's last
 waypoint, or when the world takes the aircraft out of play; every agent is truncated after
-``max_cycles`` steps. Agents that ended leave ``env.agents``; their aircraft is then flown
-by the world's built-in autopilot and resolver.
+``max_cycles`` steps. Agents that ended leave ``env.agents``; their aircraft then either
+keeps flying with the world's built-in autopilot and resolver (``ended="resolver"``, the
+default) or leaves the world at once (``ended="leave"``: no longer seen, tracked or
+collided with).
 
-The env is a thin layer over :class:`~airspace_sim.world.World`: route progress (waypoint,
-cross-track error, bearing and distance to the waypoint, arrival) is the world's route
-autopilot's (:meth:`RouteAutopilot.route_geometry`, its capture rule: within one step's
-travel of the waypoint or past it abeam); ``r_safe``, the sensor range and the resolver
-look-ahead that scale the observations are the world's. An agent whose autopilot is not
-``route`` has no waypoint (``has_waypoint`` 0, no progress or deviation terms).
+``step()`` once every agent has ended returns five empty dicts (SuperSuit's
+``black_death_v3`` makes that call); ``step()`` before the first ``reset()`` raises
+:class:`~.checks.ResetNeeded`.
+
+Randomised episodes: the seed draws the geometry of scenarios with a ``[randomise]``
+table (:class:`~airspace_sim.scenarios.schema.RandomiseSpec`); ``reset(options=...)``
+changes the knobs of :data:`RESET_OPTIONS` for that episode (curricula).
+
+The env is a thin layer over :class:`~airspace_sim.world.World`: route progress is the
+world's route autopilot's (:meth:`RouteAutopilot.route_geometry`), ``r_safe``, the sensor
+range and the resolver look-ahead that scale the observations are the world's.
 
 Nothing here imports pygame: the renderer is imported when ``render()`` is first called.
 """
@@ -32,13 +41,42 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
+from airspace_sim.env import checks
 from airspace_sim.env import rewards as rw
 from airspace_sim.env import spaces as sp
 from airspace_sim.errors import UserError
+from airspace_sim.geometry import wrap_angle
 from airspace_sim.world.autopilots import RouteAutopilot
+from airspace_sim.world.bodies import LOS
 from airspace_sim.world.snapshot import live_tracks
 
 RENDER_FPS = 10
+ENDED = ("resolver", "leave")
+
+#: ``reset(options=...)`` knobs, each for that episode only (Gymnasium's convention):
+#: ``traffic_count`` (int, generated aircraft: intruders of an encounter, ring size,
+#: random traffic), ``density`` (aircraft per 1000 km² of a ``random`` sector: the
+#: sector's side changes, the count does not), ``sensor_sigma`` (m, position noise),
+#: ``overrides`` (list of ``"key=value"``, as ``--set``, for anything else). Other keys
+#: are ignored with a warning, as Gymnasium envs ignore options they do not know.
+RESET_OPTIONS = ("traffic_count", "density", "sensor_sigma", "overrides")
+
+#: global state features per aircraft row (see :meth:`AirspaceParallelEnv.state`)
+STATE_NAMES = (
+    "present",
+    "x",
+    "y",
+    "vx",
+    "vy",
+    "sin_heading",
+    "cos_heading",
+    "turn_rate",
+    "agent",
+    "in_los",
+    "nmac",
+    "conflict",
+)
+STATE_LOW = (0, -1, -1, -1, -1, -1, -1, -1, 0, 0, 0, 0)
 
 
 def load_scenario(scenario, overrides=()):
@@ -49,8 +87,7 @@ def load_scenario(scenario, overrides=()):
     if isinstance(scenario, Scenario):
         if not overrides:
             return scenario
-        data = _as_table(scenario)
-        return from_dict(data, source=scenario.source, overrides=overrides)
+        return from_dict(_as_table(scenario), source=scenario.source, overrides=overrides)
     if isinstance(scenario, (str, os.PathLike)):
         return load(scenario, overrides)
     raise UserError(
@@ -59,13 +96,14 @@ def load_scenario(scenario, overrides=()):
 
 
 def _as_table(obj):
-    """A Scenario as the TOML-like table the loader reads."""
+    """A Scenario as the TOML-like table the loader reads (unset optional fields left out)."""
     if dataclasses.is_dataclass(obj):
-        return {
-            f.name: _as_table(getattr(obj, f.name))
-            for f in dataclasses.fields(obj)
-            if f.name != "source"
-        }
+        out = {}
+        for f in dataclasses.fields(obj):
+            v = getattr(obj, f.name)
+            if f.name != "source" and v is not None:
+                out[f.name] = _as_table(v)
+        return out
     if isinstance(obj, (list, tuple)):
         return [_as_table(v) for v in obj]
     if isinstance(obj, dict):
@@ -73,49 +111,39 @@ def _as_table(obj):
     return obj
 
 
-def select_agents(scenario, agents=None):
-    """The scenario with its ``controlled`` marks set by ``agents``.
+def agent_ids(scenario, agents=None) -> list[str]:
+    """The ids of the aircraft that are agents, in the world's order.
 
-    ``agents`` None keeps the scenario's marks, or, if it marks none, controls the first
-    aircraft. An int n controls the first n aircraft (hand-placed, then generated); a list
-    of ids controls exactly those (hand-placed or generated ``traffic`` ids are both
-    accepted as long as the generated ones are the first of the traffic).
+    ``agents`` None keeps the scenario's ``controlled`` marks, or, if it marks none,
+    controls the first aircraft; ``"all"`` every aircraft; an int n the first n
+    (hand-placed, then generated); a list of ids exactly those, any of them.
     """
     from airspace_sim.scenarios import build_aircraft
 
-    hand = list(scenario.aircraft)
-    t = scenario.traffic
-    n_gen = t.count if t.pattern != "none" else 0
-    n_total = len(hand) + n_gen
+    specs = build_aircraft(scenario, np.random.default_rng(scenario.seed))
+    ids = [a.id for a in specs]
     if agents is None:
-        if any(a.controlled for a in hand) or (n_gen and t.controlled > 0):
-            return scenario
-        agents = 1
+        marked = [a.id for a in specs if a.controlled]
+        return marked or ids[:1]
+    if isinstance(agents, str):
+        if agents != "all":
+            raise UserError(f"agents: expected 'all', a number or a list of ids, got {agents!r}")
+        return ids
     if isinstance(agents, (int, np.integer)) and not isinstance(agents, bool):
-        n = int(agents)
-        if not 1 <= n <= n_total:
-            raise UserError(f"agents: expected 1..{n_total} aircraft, got {n}")
-        new_hand = [dataclasses.replace(a, controlled=i < n) for i, a in enumerate(hand)]
-        n_gen_ctrl = max(0, n - len(hand))
-    else:
-        wanted = [str(a) for a in agents]
-        if not wanted:
-            raise UserError("agents: expected at least one aircraft id, got none")
-        ids = [a.id for a in build_aircraft(scenario, scenario.seed)]
-        unknown = [a for a in wanted if a not in ids]
-        if unknown:
-            raise UserError(f"agents: unknown aircraft {unknown[0]!r} (known: {', '.join(ids)})")
-        new_hand = [dataclasses.replace(a, controlled=a.id in wanted) for a in hand]
-        gen_ids = ids[len(hand) :]
-        chosen = [i for i, a in enumerate(gen_ids) if a in wanted]
-        n_gen_ctrl = len(chosen)
-        if chosen and chosen != list(range(n_gen_ctrl)):
-            raise UserError(
-                f"agents: generated aircraft can be agents only from the first one "
-                f"({gen_ids[0]}) on, got {', '.join(gen_ids[i] for i in chosen)}"
-            )
-    traffic = dataclasses.replace(t, controlled=min(n_gen_ctrl, n_gen))
-    return dataclasses.replace(scenario, aircraft=new_hand, traffic=traffic)
+        n = checks.integer(agents, "agents", 1, len(ids))
+        return ids[:n]
+    if not isinstance(agents, (list, tuple)):
+        raise UserError(f"agents: expected 'all', a number or a list of ids, got {agents!r}")
+    wanted = [str(a) for a in agents]
+    if not wanted:
+        raise UserError("agents: expected at least one aircraft id, got none")
+    unknown = [a for a in wanted if a not in ids]
+    if unknown:
+        known = ", ".join(ids if len(ids) <= 12 else ids[:12] + ["..."])
+        raise UserError(f"agents: unknown aircraft {unknown[0]!r} (known: {known})")
+    if len(set(wanted)) != len(wanted):
+        raise UserError(f"agents: an aircraft is listed twice, got {wanted}")
+    return [a for a in ids if a in wanted]
 
 
 class AirspaceParallelEnv(ParallelEnv):
@@ -125,15 +153,22 @@ class AirspaceParallelEnv(ParallelEnv):
     ----------
     scenario : a scenario name (file stem in ``scenarios/``), a path or a Scenario.
     render_mode : "rgb_array", "human" or None.
-    max_cycles : steps before every agent is truncated; None = the scenario's duration.
+    max_cycles : steps before every agent is truncated (a positive integer); None = the
+        scenario's duration.
     overrides : list of ``"key=value"`` applied to the scenario (as ``--set``).
     seed : default world seed for the first ``reset()`` without a seed (None = the
-        scenario's seed).
+        scenario's seed); Gymnasium's seed rules (:func:`.checks.seed`).
     n_intruders : K, number of intruder rows in the observation.
-    discrete_actions : Discrete(5) actions instead of a continuous turn rate.
+    discrete_actions : ``Discrete(6)`` actions instead of a continuous turn rate.
     reward : dict of reward term weights (see :mod:`airspace_sim.env.rewards`).
-    agents : which aircraft are agents (see :func:`select_agents`).
+    agents : which aircraft are agents (see :func:`agent_ids`).
     render_size : (width, height) of rendered frames in pixels.
+    ended : what the aircraft of an agent whose episode ended does: ``"resolver"`` (keeps
+        flying with the built-in autopilot and resolver) or ``"leave"`` (leaves the world).
+    max_aircraft : rows of the global state (default: the scenario's number of aircraft);
+        ``reset(options=...)`` may not ask for more.
+    state_scale_m : metres that map to ±1 in the global state's positions (default: 1.5 ×
+        the farthest start position or waypoint from the origin, rounded up to 10 km).
     """
 
     metadata = {
@@ -155,51 +190,74 @@ class AirspaceParallelEnv(ParallelEnv):
         reward: dict | None = None,
         agents=None,
         render_size: tuple[int, int] = (800, 800),
+        ended: str = "resolver",
+        max_aircraft: int | None = None,
+        state_scale_m: float | None = None,
     ):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise UserError(
                 f"render_mode: expected one of {', '.join(self.metadata['render_modes'])} "
                 f"or None, got {render_mode!r}"
             )
-        if int(n_intruders) < 0:
-            raise UserError(f"n_intruders: expected a non-negative integer, got {n_intruders}")
-        if max_cycles is not None and int(max_cycles) < 1:
-            raise UserError(f"max_cycles: expected a positive integer, got {max_cycles}")
-        self.scenario = select_agents(load_scenario(scenario, overrides), agents)
+        n_intruders = checks.integer(n_intruders, "n_intruders", 0, 1000)
+        if max_cycles is not None:
+            max_cycles = checks.integer(max_cycles, "max_cycles", 1, 10**9)
+        self.discrete_actions = checks.flag(discrete_actions, "discrete_actions")
+        self.ended = checks.one_of(ended, "ended", ENDED)
+        seed = checks.seed(seed, "seed")
+        try:
+            w, h = render_size
+            self.render_size = (checks.integer(w, "render_size", 16, 8192),) + (
+                checks.integer(h, "render_size", 16, 8192),
+            )
+        except (TypeError, ValueError) as exc:
+            if isinstance(exc, UserError):
+                raise
+            raise UserError(f"render_size: expected (width, height), got {render_size!r}") from None
+        self._overrides = [overrides] if isinstance(overrides, str) else list(overrides or ())
+        self.scenario = load_scenario(scenario, self._overrides)
+        self._agents_arg = agents
+        self.possible_agents = agent_ids(self.scenario, agents)
         self.render_mode = render_mode
-        self.max_cycles = int(max_cycles) if max_cycles is not None else self.scenario.n_steps
-        self.discrete_actions = bool(discrete_actions)
+        self.max_cycles = max_cycles if max_cycles is not None else self.scenario.n_steps
         self.reward_weights = rw.merge_weights(reward)
-        self.render_size = tuple(int(v) for v in render_size)
-        self._default_seed = self.scenario.seed if seed is None else int(seed)
+        self._default_seed = self.scenario.seed if seed is None else seed
         self._seed_rng = None  # draws world seeds for reset(seed=None) after the first
         self._renderer = None
+        self._variants = {(): self.scenario}  # reset options -> scenario
 
-        self.world = w = self._make_world(self._default_seed)
-        self._index = {aid: i for i, aid in enumerate(w.ids)}
-        self.possible_agents = [aid for aid, c in zip(w.ids, w.controlled) if c]
-        if not self.possible_agents:
-            raise UserError(f"{self.scenario.source}: no controlled aircraft to be agents")
-        self._agent_idx = np.array([self._index[a] for a in self.possible_agents], dtype=np.int64)
-        self._slot = {a: k for k, a in enumerate(self.possible_agents)}  # row in _route arrays
-        self._max_rate = {a: float(w.max_turn_rate[self._index[a]]) for a in self.possible_agents}
+        self.world = w = self._make_world(self.scenario, self._default_seed)
+        self._agent_set = frozenset(self.possible_agents)
+        rate = {a: float(w.max_turn_rate[w.ids.index(a)]) for a in self.possible_agents}
+        self._max_rate = rate
+        self.max_aircraft = (
+            w.n if max_aircraft is None else checks.integer(max_aircraft, "max_aircraft", w.n)
+        )
+        if state_scale_m is None:
+            far = max(
+                [float(np.abs(s.position).max()) for s in w.specs]
+                + [float(np.abs(p).max()) for s in w.specs for p in s.waypoints]
+                + [1.0]
+            )
+            state_scale_m = 10_000.0 * math.ceil(1.5 * far / 10_000.0)
+        self.state_scale_m = checks.positive_number(state_scale_m, "state_scale_m")
         self.observation_layout = sp.ObservationLayout(
-            n_intruders=int(n_intruders),
+            n_intruders=n_intruders,
             n_modes=w.tracks.n_modes,
             sensor_range=w.sensor_range,
             r_safe=w.r_safe,
             lookahead=float(w.lookahead),
         )
         # spaces are built once: observation_space(a) returns the same object every call
-        self.observation_spaces = {a: self.observation_layout.space() for a in self.possible_agents}
-        self.action_spaces = {
-            a: sp.action_space(self._max_rate[a], self.discrete_actions)
-            for a in self.possible_agents
-        }
-        low, high = self.observation_layout.bounds()
-        n_ag = len(self.possible_agents)
-        self.state_space = spaces.Box(np.tile(low, n_ag), np.tile(high, n_ag), dtype=np.float32)
+        obs_space = self.observation_layout.space()
+        act_space = sp.action_space(self.discrete_actions)
+        self.observation_spaces = {a: obs_space for a in self.possible_agents}
+        self.action_spaces = {a: act_space for a in self.possible_agents}
+        f = len(STATE_NAMES)
+        low = np.tile(np.array(STATE_LOW, np.float32), self.max_aircraft)
+        self.state_space = spaces.Box(low, np.ones(f * self.max_aircraft, np.float32))
         self.agents = []
+        self._reset_done = False
 
     # ---------------------------------------------------------------- spaces
     def observation_space(self, agent):
@@ -209,109 +267,238 @@ class AirspaceParallelEnv(ParallelEnv):
         return self.action_spaces[agent]
 
     # ----------------------------------------------------------------- world
-    def _make_world(self, seed):
+    def _make_world(self, scenario, seed):
+        """A world of ``scenario`` at ``seed`` whose agents are the possible agents in it."""
+        from airspace_sim.scenarios import build_aircraft
         from airspace_sim.world import World
 
-        return World(self.scenario, seed=seed)
+        specs = build_aircraft(scenario, np.random.default_rng(seed))
+        agents = set(self.possible_agents)
+        for s in specs:
+            s.controlled = s.id in agents
+        return World(scenario, seed=seed, aircraft=specs)
 
-    def _route_progress(self):
-        """Route geometry of every possible agent from the world's route autopilots, (A,)
-        arrays in ``possible_agents`` order: ``(index, done, cross_track m, bearing rad,
-        distance m)`` as :meth:`RouteAutopilot.route_geometry` (index 0, not done, no
-        waypoint ahead for an agent that flies another autopilot)."""
+    def _variant(self, options) -> Any:
+        """The scenario for ``reset(options=...)`` (see :data:`RESET_OPTIONS`), cached."""
+        if options is None:
+            return self.scenario
+        if not isinstance(options, dict):
+            raise UserError(f"reset: options: expected a dict or None, got {options!r}")
+        unknown = [k for k in options if k not in RESET_OPTIONS]
+        if unknown:  # ignored, as Gymnasium envs ignore options they do not know
+            import gymnasium
+
+            gymnasium.logger.warn(
+                f"reset: options: unknown key {unknown[0]!r} ignored "
+                f"(known: {', '.join(RESET_OPTIONS)})"
+            )
+        sc = self.scenario
+        extra = []
+        if options.get("traffic_count") is not None:
+            n = checks.integer(options["traffic_count"], "reset: options.traffic_count", 1)
+            extra.append(f"traffic.count={n}")
+        if options.get("sensor_sigma") is not None:
+            sigma = options["sensor_sigma"]
+            if isinstance(sigma, bool) or not isinstance(sigma, (int, float, np.number)):
+                raise UserError(f"reset: options.sensor_sigma: expected metres, got {sigma!r}")
+            extra.append(f"sensor.sigma={float(sigma)!r}")
+        if options.get("density") is not None:
+            dens = checks.positive_number(options["density"], "reset: options.density")
+            if sc.traffic.pattern != "random":
+                raise UserError(
+                    "reset: options.density: needs a scenario with traffic.pattern 'random', "
+                    f"got {sc.traffic.pattern!r}"
+                )
+            count = options.get("traffic_count") or sc.traffic.count
+            extra.append(f"traffic.sector={math.sqrt(count / dens * 1e9)!r}")
+        ov = options.get("overrides") or ()
+        ov = [ov] if isinstance(ov, str) else list(ov)
+        if not all(isinstance(o, str) for o in ov):
+            raise UserError(f"reset: options.overrides: expected 'key=value' strings, got {ov!r}")
+        key = tuple(extra + ov)
+        if key in self._variants:
+            return self._variants[key]
+        variant = load_scenario(sc, list(key)) if key else sc
+        from airspace_sim.scenarios import build_aircraft
+
+        ids = [a.id for a in build_aircraft(variant, np.random.default_rng(variant.seed))]
+        if len(ids) > self.max_aircraft:
+            raise UserError(
+                f"reset: options: {len(ids)} aircraft, more than max_aircraft "
+                f"({self.max_aircraft}, the global state's rows)"
+            )
+        if not set(ids) & set(self.possible_agents):
+            raise UserError(f"reset: options: none of the agents is in the scenario, got {key}")
+        self._variants[key] = variant
+        return variant
+
+    def _route_geometry(self):
+        """Route state of the live world's aircraft, (N,) arrays: ``(index, done, cross m,
+        bearing rad, distance m)`` as :meth:`RouteAutopilot.route_geometry` (index 0, not
+        done, NaN distance for aircraft that fly another autopilot)."""
         w = self.world
         n = w.n
         index, done = np.zeros(n, np.int64), np.zeros(n, bool)
         cross, bearing, dist = np.zeros(n), np.zeros(n), np.full(n, np.nan)
         state = w.flight_state()
-        for members, ap in w.autopilots:
-            if isinstance(ap, RouteAutopilot):
-                g = ap.route_geometry(state)
-                index[members], done[members], cross[members], bearing[members], dist[members] = g
-        i = self._agent_idx
-        return index[i], done[i], cross[i], bearing[i], dist[i]
+        for members, ap in self._route_aps:
+            g = ap.route_geometry(state)
+            index[members], done[members], cross[members], bearing[members], dist[members] = g
+        return index, done, cross, bearing, dist
+
+    def _route_progress(self) -> np.ndarray:
+        """(N,) metres of route covered (0 for aircraft without a route)."""
+        out = np.zeros(self.world.n)
+        state = self.world.flight_state()
+        for members, ap in self._route_aps:
+            out[members] = ap.progress(state)
+        return out
 
     # ----------------------------------------------------------------- reset
     def reset(self, seed: int | None = None, options: dict | None = None):
+        """Start an episode. ``seed``: Gymnasium's rules (:func:`.checks.seed`); the same
+        seed gives the same episode bit for bit. ``options``: see :data:`RESET_OPTIONS`."""
+        seed = checks.seed(seed, "reset: seed")
+        scenario = self._variant(options)
         if seed is not None:
-            world_seed = int(seed)
+            world_seed = seed
             self._seed_rng, _ = seeding.np_random(world_seed)
         elif self._seed_rng is None:
             world_seed = self._default_seed
             self._seed_rng, _ = seeding.np_random(world_seed)
         else:
             world_seed = int(self._seed_rng.integers(2**31 - 1))
-        self.world = self._make_world(world_seed)
+        self.world = w = self._make_world(scenario, world_seed)
         self.world_seed = world_seed
-        self.agents = list(self.possible_agents)
+        self._reset_done = True
+        self._index = {aid: i for i, aid in enumerate(w.ids)}
+        self.agents = [a for a in self.possible_agents if a in self._index]
+        self._route_aps = [(m, ap) for m, ap in w.autopilots if isinstance(ap, RouteAutopilot)]
+        planned = np.zeros(w.n)
+        for members, ap in self._route_aps:
+            planned[members] = ap.planned
+        self._planned = planned
         self.num_cycles = 0
-        self._route = self._route_progress()
+        self._route = self._route_geometry()
+        self._covered = self._route_progress()
         if self._renderer is not None:
             self._renderer.reset()
         obs = self._observe_all(self.agents)
-        infos = {}
-        for a in self.agents:
-            info = self._base_info(a)
-            info["reward_terms"] = rw.weighted_terms(self.reward_weights, {})
+        idx = np.array([self._index[a] for a in self.agents], dtype=np.int64)
+        infos = self._infos(self.agents, idx)
+        zero = rw.weighted_terms(self.reward_weights, {})
+        for info in infos.values():
+            info["reward_terms"] = dict(zero)
             info["arrived"] = False
-            infos[a] = info
         return obs, infos
 
     # ------------------------------------------------------------------ step
     def step(self, actions: dict):
-        if not self.agents:
-            raise UserError("step() called with no live agents: call reset() first")
-        w = self.world
-        unknown = [a for a in actions if a not in self.possible_agents]
+        """One world step. ``actions``: ``{agent: action}`` (see :mod:`.spaces`); an agent
+        left out, or given ``None``, flies the built-in pilot this step."""
+        if not self._reset_done:
+            raise checks.ResetNeeded("step: cannot call step() before calling reset()")
+        if not isinstance(actions, dict):
+            raise checks.ActionError(
+                f"step: expected a dict {{agent: action}}, got {type(actions).__name__}"
+            )
+        unknown = [a for a in actions if a not in self._agent_set]
         if unknown:
-            raise UserError(
+            raise checks.ActionError(
                 f"actions: unknown agent {unknown[0]!r} (agents: {', '.join(self.possible_agents)})"
             )
+        if not self.agents:  # every agent ended: SuperSuit's black_death_v3 steps once more
+            return {}, {}, {}, {}, {}
+        w = self.world
+        acting = list(self.agents)
+        idx = np.array([self._index[a] for a in acting], dtype=np.int64)
+        frac = self._decode(acting, actions)
         rates = np.full(w.n, np.nan)
-        commanded = {}
-        for a in self.agents:
-            if a in actions and actions[a] is not None:
-                r = sp.decode_action(a, actions[a], self._max_rate[a], self.discrete_actions)
-                rates[self._index[a]] = r
-                commanded[a] = r
+        rates[idx] = frac * w.max_turn_rate[idx]
         w.step(rates)
         self.num_cycles += 1
 
-        prev_index, prev_dist = self._route[0], self._route[4]
-        self._route = self._route_progress()
-        index, done, cross, _, dist = self._route
-        acting = list(self.agents)
-        rewards, terms, truncs, infos = {}, {}, {}, {}
-        for a in acting:
-            i, k = self._index[a], self._slot[a]
-            arrived = bool(done[k])  # an acting agent had not finished before this step
-            # distance gained toward the same waypoint (none on the step it changes)
-            progress = 0.0
-            if index[k] == prev_index[k] and np.isfinite(dist[k]) and np.isfinite(prev_dist[k]):
-                progress = (prev_dist[k] - dist[k]) / (sp.V_REF * w.dt)
-            rate = commanded.get(a, w.turn_rates[i])
-            values = {
-                "los": 0.0 - w.in_los[i],
-                "nmac": 0.0 - w.nmac[i],
-                "conflict": 0.0 - w.conflict[i],
-                "heading_change": -((rate / self._max_rate[a]) ** 2) if self._max_rate[a] else 0,
-                "deviation": -min(abs(cross[k]) / w.r_safe, 1.0),
-                "progress": float(progress),
-                "arrival": float(arrived),
-            }
-            t = rw.weighted_terms(self.reward_weights, values)
-            rewards[a] = float(sum(t.values()))
-            terms[a] = bool(w.nmac[i] or arrived or not w.active[i])
-            truncs[a] = bool(self.num_cycles >= self.max_cycles)
-            info = self._base_info(a)
-            info["reward_terms"] = t
-            info["arrived"] = arrived
-            infos[a] = info
-        self.agents = [a for a in acting if not (terms[a] or truncs[a])]
+        self._route = self._route_geometry()
+        done = self._route[1][idx]
+        covered = self._route_progress()
+        gained = (covered - self._covered)[idx]
+        self._covered = covered
+        L = self._planned[idx]
+        has_route = L > 0
+        Ls = np.where(has_route, L, 1.0)
+        travel = np.where(has_route, w.speeds[idx] * w.dt / Ls, 0.0)
+        c_max = rw.step_bound(self.reward_weights, travel)
+        nearest = self._nearest(idx)
+        mx = w.max_turn_rate[idx]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            turn = np.where(mx > 0, w.turn_rates[idx] / mx, 0.0)
+        nmac = w.nmac[idx]
+        values = {
+            "los": -rw.severity(nearest, w.r_safe, w.nmac_distance),
+            "nmac": np.where(
+                nmac,
+                rw.nmac_value(self.reward_weights, self.max_cycles - self.num_cycles + 1, c_max),
+                0,
+            ),
+            "conflict": -w.conflict[idx].astype(float),
+            "heading_change": -(turn**2),
+            "progress": np.where(has_route, gained / Ls, 0.0),
+            "path": np.where(has_route, gained / Ls - travel, 0.0),
+            "arrival": done.astype(float),
+        }
+        truncated = self.num_cycles >= self.max_cycles
+        wts = self.reward_weights
+        names = list(rw.DEFAULT_WEIGHTS)
+        weighted = np.stack([wts[n] * values[n] for n in names], axis=1)  # (A, terms)
+        total = weighted.sum(axis=1).tolist()
+        weighted = weighted.tolist()
+        ended = (nmac | done | ~w.active[idx]).tolist()
+        infos = self._infos(acting, idx)
+        rewards, terms, truncs = {}, {}, {}
+        for k, a in enumerate(acting):
+            rewards[a] = total[k]
+            terms[a] = ended[k]
+            truncs[a] = truncated and not ended[k]
+            info = infos[a]
+            info["reward_terms"] = dict(zip(names, weighted[k]))
+            info["arrived"] = bool(done[k])
+            info["separation_m"] = float(nearest[k])
         obs = self._observe_all(acting)
+        self.agents = [a for a in acting if not (terms[a] or truncs[a])]
+        if self.ended == "leave":
+            gone = [self._index[a] for a in acting if terms[a] or truncs[a]]
+            if gone:
+                w.retire(gone)
         if self.render_mode == "human":
             self.render()
         return obs, rewards, terms, truncs, infos
+
+    def _decode(self, acting, actions) -> np.ndarray:
+        """(A,) turn fractions (NaN: built-in) of the acting agents' actions. The common
+        case, one float array of shape (1,) per agent as vector envs send, is checked in
+        one go; anything else goes through :func:`.spaces.decode_action` one by one."""
+        got = [actions.get(a) for a in acting]
+        if not self.discrete_actions and all(
+            type(g) is np.ndarray and g.shape == (1,) and g.dtype.kind == "f" for g in got
+        ):
+            frac = np.concatenate(got).astype(np.float64) if got else np.zeros(0)
+            if np.isfinite(frac).all():
+                return np.clip(frac, -1.0, 1.0)
+        return np.array(
+            [sp.decode_action(a, g, self.discrete_actions) for a, g in zip(acting, got)]
+        )
+
+    def _nearest(self, idx) -> np.ndarray:
+        """(len(idx),) m from each of these aircraft to the nearest aircraft in loss of
+        separation with it (inf when none is within r_safe)."""
+        w = self.world
+        out = np.full(w.n, np.inf)
+        i, j = w.airspace.pair_arrays(LOS)
+        if len(i):
+            d = np.hypot(*(w.positions[i] - w.positions[j]).T)
+            np.minimum.at(out, i, d)
+            np.minimum.at(out, j, d)
+        return out[idx]
 
     # ----------------------------------------------------------- observation
     def _observe_all(self, agents) -> dict:
@@ -324,14 +511,18 @@ class AirspaceParallelEnv(ParallelEnv):
         idx = np.array([self._index[a] for a in agents], dtype=np.int64)
         pos, vel = w.positions[idx], w.velocities[idx]
         heading, speed, advice = w.headings[idx], w.speeds[idx], w.advice[idx]
-        max_rate = np.array([self._max_rate[a] for a in agents])
-        slot = np.array([self._slot[a] for a in agents], dtype=np.int64)
-        _, _, cross, bearing, dist = (g[slot] for g in self._route)
+        max_rate = w.max_turn_rate[idx]
+        _, _, cross, bearing, dist = (g[idx] for g in self._route)
         has_wp = np.isfinite(dist)
-        rel_b = bearing - heading
+        rel_b = wrap_angle(bearing - heading)
         dist = np.where(has_wp, dist, 0.0)
         with np.errstate(invalid="ignore", divide="ignore"):
+            per_step = max_rate * w.dt
             rate = np.where(max_rate > 0, w.turn_rates[idx] / max_rate, 0.0)
+            adv = np.where((per_step > 0) & np.isfinite(advice), advice / per_step, 0.0)
+            route = np.where(has_wp & (per_step > 0), rel_b / per_step, 0.0)
+        route = np.clip(route, -1.0, 1.0)
+        conflict = w.conflict[idx]
         own = np.stack(
             [
                 speed / sp.V_REF,
@@ -343,9 +534,11 @@ class AirspaceParallelEnv(ParallelEnv):
                 np.where(has_wp, np.cos(rel_b), 1.0),
                 np.where(has_wp, dist / (2 * lay.sensor_range), 0.0),
                 has_wp.astype(float),
-                np.where(np.isfinite(advice), advice / math.pi, 0.0),
-                w.conflict[idx].astype(float),
+                adv,
+                conflict.astype(float),
                 w.in_los[idx].astype(float),
+                route,
+                np.where(conflict, adv, route),
             ],
             axis=1,
         )
@@ -359,17 +552,29 @@ class AirspaceParallelEnv(ParallelEnv):
         obs = sp.finish(lay, own, intr)
         return {a: obs[k] for k, a in enumerate(agents)}
 
-    def _base_info(self, a) -> dict[str, Any]:
+    def _infos(self, agents, idx) -> dict[str, dict[str, Any]]:
+        """Per-agent info dicts: time s, step, conflict, in_los, nmac, advice rad,
+        waypoint_index (the caller adds reward terms)."""
         w = self.world
-        i = self._index[a]
+        time, step = float(w.time), int(w.step_count)
+        cols = zip(
+            w.conflict[idx].tolist(),
+            w.in_los[idx].tolist(),
+            w.nmac[idx].tolist(),
+            w.advice[idx].tolist(),
+            self._route[0][idx].tolist(),
+        )
         return {
-            "time": float(w.time),
-            "step": int(w.step_count),
-            "conflict": bool(w.conflict[i]),
-            "in_los": bool(w.in_los[i]),
-            "nmac": bool(w.nmac[i]),
-            "advice": float(w.advice[i]),
-            "waypoint_index": int(self._route[0][self._slot[a]]),
+            a: {
+                "time": time,
+                "step": step,
+                "conflict": c,
+                "in_los": los,
+                "nmac": nm,
+                "advice": adv,
+                "waypoint_index": wp,
+            }
+            for a, (c, los, nm, adv, wp) in zip(agents, cols)
         }
 
     # ---------------------------------------------------------------- render
@@ -397,10 +602,39 @@ class AirspaceParallelEnv(ParallelEnv):
             self._renderer = None
 
     def state(self) -> np.ndarray:
-        """Global state: every agent's observation, concatenated in ``possible_agents`` order."""
-        obs = self._observe_all(self.agents)
-        zero = np.zeros(self.observation_layout.size, np.float32)
-        return np.concatenate([obs.get(a, zero) for a in self.possible_agents])
+        """Global state for a centralised critic: ``(max_aircraft · 12,)`` float32 in
+        :attr:`state_space`, one row per aircraft in the world's order (zero rows pad up to
+        ``max_aircraft``); per row :data:`STATE_NAMES`: present (1 while the aircraft is in
+        the world), absolute position / ``state_scale_m``, velocity / (2 v_ref), sin and cos
+        of the heading, turn rate / its limit, live agent, in loss of separation, NMAC,
+        conflict alert. Positions are clipped to ±1."""
+        if not self._reset_done:
+            raise checks.ResetNeeded("state: cannot call state() before calling reset()")
+        w = self.world
+        n = w.n
+        out = np.zeros((self.max_aircraft, len(STATE_NAMES)))
+        live = np.zeros(n, bool)
+        live[[self._index[a] for a in self.agents]] = True
+        act = w.active
+        with np.errstate(invalid="ignore", divide="ignore"):
+            rate = np.where(w.max_turn_rate > 0, w.turn_rates / w.max_turn_rate, 0.0)
+        cols = [
+            np.ones(n),
+            w.positions[:, 0] / self.state_scale_m,
+            w.positions[:, 1] / self.state_scale_m,
+            w.velocities[:, 0] / (2 * sp.V_REF),
+            w.velocities[:, 1] / (2 * sp.V_REF),
+            np.sin(w.headings),
+            np.cos(w.headings),
+            rate,
+            live,
+            w.in_los,
+            w.nmac,
+            w.conflict,
+        ]
+        out[:n] = np.where(act[:, None], np.stack(cols, axis=1), 0.0)
+        low = np.array(STATE_LOW, float)
+        return np.clip(out, low, 1.0).astype(np.float32).reshape(-1)
 
     # ---------------------------------------------------------------- pickling
     def __getstate__(self) -> dict:

@@ -4,20 +4,28 @@ Observation: one flat ``float32`` :class:`gymnasium.spaces.Box` per agent, every
 normalised and clipped to finite bounds (mostly [-1, 1], flags and probabilities [0, 1]).
 Layout (see :meth:`ObservationLayout.names` for every entry's name):
 
-``own`` block (12 entries), the ownship's true state:
+``own`` block (14 entries), the ownship's true state; entries 3, 9, 12 and 13 are in
+**action units** (fractions of the aircraft's turn-rate limit ω_max, CCW +), so that an
+action equal to one of them flies it:
 
     0  speed / v_ref                          [0, 2]     v_ref = 300 m/s
     1  sin(heading)                           [-1, 1]    heading CCW from east
     2  cos(heading)                           [-1, 1]
-    3  turn rate / max turn rate              [-1, 1]    last step's
+    3  turn rate / ω_max                      [-1, 1]    last step's
     4  cross-track error / (10 r_safe)        [-1, 1]    + left of the route leg
     5  sin(bearing to waypoint - heading)     [-1, 1]    0 with no route
     6  cos(bearing to waypoint - heading)     [-1, 1]    1 with no route
     7  distance to waypoint / (2 range)       [0, 1]     range = sensor range
     8  has a waypoint ahead                   {0, 1}
-    9  resolver advice / pi                   [-1, 1]    heading change, CCW +
+    9  resolver advice / (ω_max dt)           [-1, 1]    the built-in resolver's turn for
+                                                         the coming step (0 when clear)
    10  conflict alert                         {0, 1}
    11  in loss of separation                  {0, 1}
+   12  route command / ω_max                  [-1, 1]    the route autopilot's turn toward
+                                                         the waypoint (0 with no route)
+   13  built-in command / ω_max               [-1, 1]    entry 9 while in conflict, else
+                                                         entry 12: "advice + steer to the
+                                                         waypoint"
 
 then ``K`` intruder rows (nearest first by estimated range), each ``11 + M`` entries, the
 ownship's **tracker** estimates in the ownship's body frame (x forward, y left):
@@ -32,25 +40,40 @@ ownship's **tracker** estimates in the ownship's body frame (x forward, y left):
    10  miss distance at closest approach / (2 r_safe)             [0, 1]
    11.. mode probabilities μ (M of them: straight, left, right)    [0, 1]
 
-Action: heading-rate command in rad/s, ``Box(-ω_max, ω_max, (1,), float32)`` with ω_max
-the aircraft's turn-rate limit; or with ``discrete_actions`` a ``Discrete(5)`` over
-``DISCRETE_LEVELS`` × ω_max: hard left, left, straight, right, hard right (left = CCW = +).
+Action: a **normalised** heading-rate command ``Box(-1, 1, (1,), float32)``, the fraction
+of the aircraft's turn-rate limit ω_max (+1 = full rate left, CCW); values outside [-1, 1]
+are clipped, as Gymnasium's ``ClipAction`` would. With ``discrete_actions`` a
+``Discrete(6)``: ``DISCRETE_LEVELS`` × ω_max for 0..4 (hard left, left, straight, right,
+hard right) and :data:`BUILTIN_ACTION` (5).
+
+**"Do what the built-in pilot would do"**: the discrete action :data:`BUILTIN_ACTION`, or,
+in either variant, ``None`` as an agent's action (or leaving the agent out of the action
+dict): the aircraft then flies the world's autopilot and CDA resolver for that step, exactly
+as background traffic does. ``own.builtin_command`` approximates it in action units (it
+leaves out the resolver's "hold heading until the turn back is clear" rule).
+
+Malformed actions raise :class:`~airspace_sim.env.checks.ActionError`, a
+:class:`~airspace_sim.errors.UserError` that is also Gymnasium's ``InvalidAction``:
+non-finite numbers, strings, bytes, booleans, complex numbers, datetimes, objects, wrong
+sizes; a discrete action must be an integer (Python or NumPy, as ``Discrete.contains``
+accepts) in 0..5.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 from gymnasium import spaces
 
-from airspace_sim.errors import UserError
-
 V_REF = 300.0  #: m/s, speed normalisation
 #: discrete action index -> fraction of the turn-rate limit (CCW +): hard left .. hard right
 DISCRETE_LEVELS = (1.0, 0.5, 0.0, -0.5, -1.0)
-DISCRETE_NAMES = ("hard left", "left", "straight", "right", "hard right")
+DISCRETE_NAMES = ("hard left", "left", "straight", "right", "hard right", "built-in")
+#: discrete action: fly the world's built-in autopilot and resolver this step
+BUILTIN_ACTION = len(DISCRETE_LEVELS)
 
 OWN_NAMES = (
     "speed",
@@ -65,9 +88,11 @@ OWN_NAMES = (
     "advice",
     "conflict",
     "in_los",
+    "route_command",
+    "builtin_command",
 )
-OWN_LOW = (0, -1, -1, -1, -1, -1, -1, 0, 0, -1, 0, 0)
-OWN_HIGH = (2, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1)
+OWN_LOW = (0, -1, -1, -1, -1, -1, -1, 0, 0, -1, 0, 0, -1, -1)
+OWN_HIGH = (2, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1)
 INTRUDER_NAMES = (
     "mask",
     "rel_x",
@@ -116,10 +141,16 @@ class ObservationLayout:
         return out
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(size,) float32 lower and upper bounds (read-only arrays, built once)."""
+        return self._bounds
+
+    @functools.cached_property
+    def _bounds(self) -> tuple[np.ndarray, np.ndarray]:
         ilow = INTRUDER_LOW + (0,) * self.n_modes
         ihigh = INTRUDER_HIGH + (1,) * self.n_modes
         low = np.array(OWN_LOW + ilow * self.n_intruders, dtype=np.float32)
         high = np.array(OWN_HIGH + ihigh * self.n_intruders, dtype=np.float32)
+        low.flags.writeable = high.flags.writeable = False
         return low, high
 
     def space(self) -> spaces.Box:
@@ -133,49 +164,65 @@ class ObservationLayout:
         )
 
 
-def action_space(max_turn_rate: float, discrete: bool) -> spaces.Space:
-    """The action space of an aircraft with turn-rate limit ``max_turn_rate`` rad/s."""
+def action_space(discrete: bool) -> spaces.Space:
+    """The action space of every agent: normalised turn rate, or the discrete levels."""
     if discrete:
-        return spaces.Discrete(len(DISCRETE_LEVELS))
-    w = np.float32(max_turn_rate)
-    return spaces.Box(-w, w, shape=(1,), dtype=np.float32)
+        return spaces.Discrete(len(DISCRETE_LEVELS) + 1)
+    return spaces.Box(np.float32(-1.0), np.float32(1.0), shape=(1,), dtype=np.float32)
 
 
-def decode_action(agent: str, action, max_turn_rate: float, discrete: bool) -> float:
-    """Heading rate in rad/s from one agent's action; :class:`UserError` if malformed.
+def decode_action(agent: str, action, discrete: bool) -> float:
+    """One agent's action as a fraction of its turn-rate limit in [-1, 1], or NaN for the
+    built-in pilot (``None``, or :data:`BUILTIN_ACTION`); :class:`ActionError` if malformed
+    (see the module docstring)."""
+    from airspace_sim.env.checks import ActionError
 
-    Continuous actions are clipped to ±``max_turn_rate``; NaN or inf is an error.
-    """
+    if action is None:
+        return math.nan
+    arr = action if isinstance(action, np.ndarray) else None
     if discrete:
-        try:
-            idx = int(np.asarray(action).reshape(()))
-            bad = idx != np.asarray(action).reshape(()) or not 0 <= idx < len(DISCRETE_LEVELS)
-        except (TypeError, ValueError):
-            bad = True
-        if bad:
-            raise UserError(
-                f"action for agent {agent!r}: expected an integer in 0..{len(DISCRETE_LEVELS) - 1}"
-                f" ({', '.join(DISCRETE_NAMES)}), got {action!r}"
+        ok = isinstance(action, (int, np.integer)) and not isinstance(action, (bool, np.bool_))
+        if arr is not None and arr.dtype.kind in "iu" and arr.size == 1 and arr.ndim <= 1:
+            action, ok = arr.reshape(()).item(), True
+        if not ok or not 0 <= int(action) <= BUILTIN_ACTION:
+            raise ActionError(
+                f"action for agent {agent!r}: expected an integer in 0..{BUILTIN_ACTION} "
+                f"({', '.join(DISCRETE_NAMES)}), got {_show(action)}"
             )
-        return DISCRETE_LEVELS[idx] * max_turn_rate
+        idx = int(action)
+        return math.nan if idx == BUILTIN_ACTION else DISCRETE_LEVELS[idx]
+    if isinstance(action, (str, bytes, bool, np.bool_, complex)) or not isinstance(
+        action, (int, float, np.number, np.ndarray, list, tuple)
+    ):
+        raise ActionError(
+            f"action for agent {agent!r}: expected a number in [-1, 1] (fraction of the "
+            f"turn-rate limit), got {_show(action)}"
+        )
     try:
-        a = np.asarray(action, dtype=np.float64).reshape(-1)
+        a = np.asarray(action)
     except (TypeError, ValueError):
-        raise UserError(
-            f"action for agent {agent!r}: expected a heading rate in rad/s, got {action!r}"
-        ) from None
+        a = np.asarray(None)
+    if a.dtype.kind not in "fiu":
+        raise ActionError(
+            f"action for agent {agent!r}: expected a number in [-1, 1] (fraction of the "
+            f"turn-rate limit), got {_show(action)}"
+        )
     if a.size != 1:
-        raise UserError(
-            f"action for agent {agent!r}: expected one heading rate in rad/s, got shape "
-            f"{np.shape(action)}"
+        raise ActionError(
+            f"action for agent {agent!r}: expected one number in [-1, 1], got shape {a.shape}"
         )
-    value = float(a[0])
+    value = float(a.reshape(-1)[0])
     if not math.isfinite(value):
-        raise UserError(
-            f"action for agent {agent!r}: heading rate is {value} (expected a finite number "
-            "in rad/s)"
+        raise ActionError(
+            f"action for agent {agent!r}: expected a finite number in [-1, 1], got {value}"
         )
-    return float(np.clip(value, -max_turn_rate, max_turn_rate))
+    return min(max(value, -1.0), 1.0)
+
+
+def _show(value) -> str:
+    """A one-line, bounded rendering of a bad value for an error message."""
+    text = repr(value).replace("\n", " ")
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def encode_intruders(
@@ -283,12 +330,12 @@ def encode_intruders_batch(
 
 
 def finish(layout: ObservationLayout, own: np.ndarray, intruders: np.ndarray) -> np.ndarray:
-    """Concatenate own (..., 12) and intruder (..., K, F) blocks, NaN -> 0, clip into the
+    """Concatenate own (..., 14) and intruder (..., K, F) blocks, NaN -> 0, clip into the
     space's bounds; float32 (..., size)."""
     own = np.asarray(own, np.float64)
     intruders = np.asarray(intruders, np.float64)
     lead = own.shape[:-1]
     obs = np.concatenate([own, intruders.reshape(lead + (-1,))], axis=-1)
-    obs = np.nan_to_num(obs, nan=0.0, posinf=np.inf, neginf=-np.inf)
+    obs[np.isnan(obs)] = 0.0
     low, high = layout.bounds()
-    return np.clip(obs, low, high).astype(np.float32)
+    return np.clip(obs, low, high, out=obs).astype(np.float32)

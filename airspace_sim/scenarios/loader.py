@@ -163,6 +163,14 @@ def _params_range(meta, tp) -> Callable[[Any], str | None] | None:
     return _check(what, lambda v: parts.in_range(meta, v))
 
 
+def _interval(lo: float, hi: float, unit: str) -> Callable[[Any], str | None]:
+    """A ``[low, high]`` range with ``lo ≤ low ≤ high ≤ hi``."""
+    return _check(
+        f"[low, high] with {lo:g} ≤ low ≤ high ≤ {hi:g} ({unit})",
+        lambda v: lo <= v[0] <= v[1] <= hi,
+    )
+
+
 #: Physically meaningful limits (issue 11: beyond them the simulation overflows or runs
 #: out of memory rather than failing cleanly).
 MAX_DISTANCE_M = 1e7  #: ranges, radii, sectors: 10 000 km
@@ -237,6 +245,11 @@ RANGES: dict[str, Callable[[Any], str | None]] = {
     "TrafficSpec.autopilot": _one_of_registry("autopilot"),
     "TrafficSpec.max_turn_rate_deg": _range(0, 3600.0, unit="deg/s"),
     "TrafficSpec.controlled": NON_NEGATIVE_INT,
+    "RandomiseSpec.radius": _interval(1.0, MAX_DISTANCE_M, "m"),
+    "RandomiseSpec.phase_deg": _interval(-360.0, 360.0, "deg"),
+    "RandomiseSpec.heading_deg": _interval(-180.0, 180.0, "deg"),
+    "RandomiseSpec.speed": _interval(1.0, MAX_SPEED, "m/s"),
+    "RandomiseSpec.start_s": _interval(0.0, MAX_LOOKAHEAD_S, "s"),
 }
 
 
@@ -523,6 +536,11 @@ def check_scenario(sc: Scenario) -> None:
             f"expected at most traffic.speed − {MIN_SPEED:g} m/s ({t.speed - MIN_SPEED:g} m/s: "
             f"generated speeds stay ≥ {MIN_SPEED:g} m/s), got {t.speed_spread:g}",
         )
+    from airspace_sim.scenarios.traffic import randomise_problem
+
+    problem = randomise_problem(sc)
+    if problem:
+        raise Invalid(*problem)
     if t.pattern == "encounter" and not sc.aircraft:
         raise Invalid(
             "traffic.pattern",

@@ -121,6 +121,23 @@ class TrafficSpec:
 
 
 @dataclass
+class RandomiseSpec:
+    """What the seed draws besides noise: each field a ``[low, high]`` range drawn uniformly
+    per world (per env reset); unset fields are not drawn, so a scenario without a
+    ``[randomise]`` table is the same geometry for every seed. Applied by
+    :func:`airspace_sim.scenarios.traffic.build_aircraft` to every aircraft, hand-placed and
+    generated."""
+
+    radius: tuple[float, float] | None = None  #: ring radius in metres ("ring")
+    phase_deg: tuple[float, float] | None = None  #: rotation of the whole ring, degrees CCW
+    heading_deg: tuple[float, float] | None = None  #: per-aircraft heading offset, degrees
+    speed: tuple[float, float] | None = None  #: per-aircraft ground speed in m/s
+    #: per-aircraft start delay in seconds: the aircraft starts speed·delay metres back along
+    #: its initial heading (as if it entered later on the same track)
+    start_s: tuple[float, float] | None = None
+
+
+@dataclass
 class Scenario:
     """A whole scenario. ``source`` is the file it came from (for error messages)."""
 
@@ -135,6 +152,7 @@ class Scenario:
     tracker: TrackerSpec = field(default_factory=TrackerSpec)
     resolver: ResolverSpec = field(default_factory=ResolverSpec)
     traffic: TrafficSpec = field(default_factory=TrafficSpec)
+    randomise: RandomiseSpec = field(default_factory=RandomiseSpec)
     aircraft: list[AircraftSpec] = field(default_factory=list)
     source: str = "<memory>"
 

@@ -20,6 +20,14 @@ ones. Patterns (``traffic.pattern``):
 
 Speeds are uniform in ``speed ± speed_spread``; the first ``controlled`` generated aircraft
 are RL agents. All randomness comes from the ``rng`` argument.
+
+Randomised geometry (``[randomise]``, :class:`~.schema.RandomiseSpec`): a scenario that sets
+ranges there gets, per seed, a ring radius and phase (drawn first, before the pattern is
+built), then per aircraft (hand-placed and generated, in order) a heading offset, a speed
+and a start delay (the aircraft starts ``speed · delay`` metres back along its heading).
+Waypoints stay where the pattern put them, so route aircraft steer back onto their route.
+A scenario without ranges draws nothing extra: its aircraft are those of earlier versions,
+bit for bit.
 """
 
 from __future__ import annotations
@@ -42,13 +50,71 @@ def build_aircraft(
     rng = np.random.default_rng(rng) if not isinstance(rng, np.random.Generator) else rng
     hand = [dataclasses.replace(a, waypoints=list(a.waypoints)) for a in scenario.aircraft]
     t = scenario.traffic
-    if t.pattern == "none" or t.count == 0:
-        return hand
-    # the loader checked the pattern and that no hand-placed id clashes with a generated one
-    generated = BUILDERS[t.pattern](scenario, rng)
-    for i, a in enumerate(generated):
-        a.controlled = i < t.controlled
-    return hand + generated
+    r = scenario.randomise
+    phase = 0.0
+    if t.pattern == "ring" and t.count:
+        if r.radius is not None:
+            t = dataclasses.replace(t, radius=float(rng.uniform(*r.radius)))
+            scenario = dataclasses.replace(scenario, traffic=t)
+        if r.phase_deg is not None:
+            phase = math.radians(rng.uniform(*r.phase_deg))
+    generated = []
+    if t.pattern != "none" and t.count:
+        # the loader checked the pattern and that no hand-placed id clashes with a generated one
+        generated = BUILDERS[t.pattern](scenario, rng)
+        for i, a in enumerate(generated):
+            a.controlled = i < t.controlled
+        if phase:
+            generated = [_rotated(a, phase) for a in generated]
+    return _jittered(hand + generated, r, rng)
+
+
+def _rotated(a: AircraftSpec, angle: float) -> AircraftSpec:
+    """``a`` with its position, heading and waypoints rotated by ``angle`` rad about the
+    origin (CCW)."""
+    c, s = math.cos(angle), math.sin(angle)
+    rot = lambda p: (c * p[0] - s * p[1], s * p[0] + c * p[1])
+    return dataclasses.replace(
+        a,
+        position=rot(a.position),
+        heading_deg=(a.heading_deg + math.degrees(angle)) % 360.0,
+        waypoints=[rot(w) for w in a.waypoints],
+    )
+
+
+def _jittered(aircraft: list[AircraftSpec], r, rng: np.random.Generator) -> list[AircraftSpec]:
+    """Per-aircraft draws of :class:`~.schema.RandomiseSpec` (heading offset, speed, start
+    delay), in that order, one array of len(aircraft) each; nothing drawn for unset ranges."""
+    n = len(aircraft)
+    dh = np.zeros(n) if r.heading_deg is None else rng.uniform(*r.heading_deg, size=n)
+    speed = None if r.speed is None else rng.uniform(*r.speed, size=n)
+    delay = np.zeros(n) if r.start_s is None else rng.uniform(*r.start_s, size=n)
+    if r.heading_deg is None and speed is None and r.start_s is None:
+        return aircraft
+    out = []
+    for k, a in enumerate(aircraft):
+        v = a.speed if speed is None else float(speed[k])
+        h = math.radians(a.heading_deg + dh[k])
+        back = v * delay[k]
+        pos = (a.position[0] - back * math.cos(h), a.position[1] - back * math.sin(h))
+        heading = (a.heading_deg + dh[k]) % 360.0
+        out.append(dataclasses.replace(a, position=pos, heading_deg=float(heading), speed=v))
+    return out
+
+
+def randomise_problem(scenario: Scenario) -> tuple[str, str] | None:
+    """``(dotted key, message)`` if the scenario's ``[randomise]`` ranges cannot be drawn
+    from (the loader's cross-field check), else None."""
+    r, t = scenario.randomise, scenario.traffic
+    if r.radius is not None and t.pattern == "ring" and t.count:
+        r_min = ring_min_radius(t.count, scenario.separation.r_safe)
+        if r.radius[0] < r_min * (1 - 1e-12):
+            return (
+                "randomise.radius",
+                f"expected a low end of at least {math.ceil(r_min)} m for a ring of {t.count} "
+                f"aircraft (neighbours 2·r_safe apart), got {list(r.radius)}",
+            )
+    return None
 
 
 def _ids(prefix: str, n: int) -> list[str]:

@@ -98,19 +98,22 @@ class AvoidancePolicy:
         self._encounters = Encounters.empty()
 
     # ------------------------------------------------------------- commands
-    def override(self, rate, desired, active, velocities, max_heading_change):
+    def override(self, rate, desired, active, velocities, max_heading_change, avoid=None):
         """Commands phase: the autopilots' turn rates with the CDA policy applied.
 
         rate : (N,) rad/s from the autopilots; desired : (N,) rad, their desired headings
         (NaN: none); active : (N,) bool; velocities : (N, 2) m/s; max_heading_change : (N,)
-        rad per step. Returns the new (N,) rad/s. Updates ``following`` and ``off_route_s``.
+        rad per step; avoid : (N,) bool, who flies the advice this step (default the
+        ``avoid`` given at construction; the world adds RL agents that leave this step to
+        the built-in pilot). Returns the new (N,) rad/s. Updates ``following`` and
+        ``off_route_s``.
         """
         n = rate.size
         follow = np.zeros(n, dtype=bool)
         resuming = np.zeros(n, dtype=bool)
         out = rate
         if self.overrides:
-            flying = self.avoid & active
+            flying = (self.avoid if avoid is None else avoid) & active
             follow = flying & self.conflict
             out = np.where(follow, self.advice / self.dt, rate)
             # resume toward the autopilot's heading only if that turn is clear

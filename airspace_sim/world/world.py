@@ -168,7 +168,8 @@ class World:
 
         heading_rate : (N,) rad/s, optional. For controlled (RL) aircraft, a finite entry is
             the commanded turn rate (clipped to ±max_turn_rate); NaN = fly the built-in
-            autopilot / resolver. Entries of other aircraft are ignored.
+            autopilot and (for ``avoid`` aircraft) resolver. Entries of other aircraft are
+            ignored.
         """
         rate = self._commands(heading_rate)
         self._motion(rate)
@@ -199,9 +200,7 @@ class World:
             rate[members] = ap.turn_rate(state)
             desired[members] = ap.desired_heading(state)
         self._read_modes()
-        rate = self.policy.override(
-            rate, desired, self.active, self.velocities, self.max_turn_rate * self.dt
-        )
+        agent = np.zeros(n, dtype=bool)  # RL agents whose command is flown this step
         if heading_rate is not None:
             hr = np.asarray(heading_rate, dtype=float).reshape(-1)
             if hr.shape != (n,):
@@ -209,6 +208,12 @@ class World:
             if np.isinf(hr).any():
                 raise UserError("heading_rate: contains an infinite value (use NaN for 'built-in')")
             agent = self.controlled & np.isfinite(hr)
+        # an avoiding agent that leaves a step to the built-in pilot flies the resolver too
+        avoid = self.avoid & ~agent if self.controlled.any() else None
+        rate = self.policy.override(
+            rate, desired, self.active, self.velocities, self.max_turn_rate * self.dt, avoid
+        )
+        if agent.any():
             rate = np.where(agent, hr, rate)
         rate = np.clip(rate, -self.max_turn_rate, self.max_turn_rate)
         rate[~self.active] = 0.0
@@ -316,6 +321,17 @@ class World:
             for _ in range(int(steps)):
                 self.step()
         return self.metrics()
+
+    def retire(self, indices) -> None:
+        """Take aircraft out of play now (``active`` False, out of the pymunk spaces): the
+        env's ``ended="leave"`` for agents whose episode ended. indices : (k,) int."""
+        idx = np.asarray(indices, dtype=np.int64).reshape(-1)
+        idx = idx[self.active[idx]]
+        if idx.size:
+            self.active[idx] = False
+            self.airspace.remove(idx)
+            self.velocities = self._velocities()
+            self._update_contact_flags()
 
     def index(self, aircraft_id: str) -> int:
         """Index of the aircraft called ``aircraft_id``."""
