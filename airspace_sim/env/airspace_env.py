@@ -61,10 +61,12 @@ def load_scenario(scenario, overrides=()):
 def _as_table(obj):
     """A Scenario as the TOML-like table the loader reads."""
     if dataclasses.is_dataclass(obj):
+        from airspace_sim.scenarios.loader import INTERNAL_FIELDS
+
         return {
             f.name: _as_table(getattr(obj, f.name))
             for f in dataclasses.fields(obj)
-            if f.name != "source"
+            if (type(obj).__name__, f.name) not in INTERNAL_FIELDS
         }
     if isinstance(obj, (list, tuple)):
         return [_as_table(v) for v in obj]

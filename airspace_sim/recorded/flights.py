@@ -30,6 +30,8 @@ from airspace_sim.geometry import wrap_angle
 #: it; the replay takes the aircraft out of the world for its duration). OpenSky's state
 #: vectors come every 1-10 s; 60 s without one is a coverage hole, not sparse sampling.
 MAX_GAP_S = 60.0
+KNOT_MS = 1852.0 / 3600.0  #: m/s per knot
+FOOT_M = 0.3048  #: m per foot
 
 
 class Frame:
@@ -183,32 +185,15 @@ class Flight:
         t = t.reshape(-1)
         ok = self.covered(t)
         i = np.clip(np.searchsorted(self.t_s, t, side="right") - 1, 0, self.t_s.size - 2)
-        t0, t1 = self.t_s[i], self.t_s[i + 1]
-        h = t1 - t0
-        u = np.clip((t - t0) / h, 0.0, 1.0)
-        out = []
-        for p, v in ((self.x_m, self.vx), (self.y_m, self.vy)):
-            p0, p1 = p[i], p[i + 1]
-            linear = (p1 - p0) / h
-            m0 = np.where(np.isfinite(v[i]) & np.isfinite(v[i + 1]), v[i], linear) * h
-            m1 = np.where(np.isfinite(v[i]) & np.isfinite(v[i + 1]), v[i + 1], linear) * h
-            # Hermite basis and its derivative (d/dt = d/du / h)
-            u2, u3 = u * u, u * u * u
-            pos = (
-                (2 * u3 - 3 * u2 + 1) * p0
-                + (u3 - 2 * u2 + u) * m0
-                + (-2 * u3 + 3 * u2) * p1
-                + (u3 - u2) * m1
-            )
-            vel = (
-                (6 * u2 - 6 * u) * p0
-                + (3 * u2 - 4 * u + 1) * m0
-                + (-6 * u2 + 6 * u) * p1
-                + (3 * u2 - 2 * u) * m1
-            ) / h
-            out += [np.where(ok, pos, np.nan), np.where(ok, vel, np.nan)]
-        x, vx, y, vy = out
-        return x.reshape(shape), y.reshape(shape), vx.reshape(shape), vy.reshape(shape)
+        j = i + 1
+        x, vx = hermite(
+            t, self.t_s[i], self.t_s[j], self.x_m[i], self.x_m[j], self.vx[i], self.vx[j]
+        )
+        y, vy = hermite(
+            t, self.t_s[i], self.t_s[j], self.y_m[i], self.y_m[j], self.vy[i], self.vy[j]
+        )
+        out = [np.where(ok, a, np.nan).reshape(shape) for a in (x, y, vx, vy)]
+        return tuple(out)
 
     def turn_rate_at(self, t_s) -> np.ndarray:
         """Recorded turn rate (rad/s) at times ``t_s``, linear between samples; NaN where
@@ -216,6 +201,24 @@ class Flight:
         t = np.asarray(t_s, dtype=float)
         w = np.interp(t, self.t_s, self.turn_rate)
         return np.where(self.covered(t), w, np.nan)
+
+
+def hermite(t, t0, t1, p0, p1, v0, v1):
+    """Cubic Hermite interpolation of one coordinate: ``(position, velocity)`` at times
+    ``t`` on segments from ``(t0, p0, v0)`` to ``(t1, p1, v1)`` (s, m, m/s; broadcast
+    arrays, ``t1 > t0``), clamped to the segment. A segment with a NaN end velocity is the
+    straight line between its positions, at constant velocity."""
+    h = t1 - t0
+    u = np.clip((t - t0) / h, 0.0, 1.0)
+    linear = (p1 - p0) / h
+    both = np.isfinite(v0) & np.isfinite(v1)
+    m0 = np.where(both, v0, linear) * h
+    m1 = np.where(both, v1, linear) * h
+    u2, u3 = u * u, u * u * u
+    pos = (2 * u3 - 3 * u2 + 1) * p0 + (u3 - 2 * u2 + u) * m0 + (-2 * u3 + 3 * u2) * p1
+    pos = pos + (u3 - u2) * m1
+    vel = (6 * u2 - 6 * u) * (p0 - p1) + (3 * u2 - 4 * u + 1) * m0 + (3 * u2 - 2 * u) * m1
+    return pos, vel / h
 
 
 def turn_rates(t_s, vx, vy, max_gap_s: float = MAX_GAP_S) -> np.ndarray:
@@ -310,19 +313,23 @@ class Flights:
     def window(self, start_s: float, end_s: float) -> Flights:
         """The flights overlapping ``[start_s, end_s]`` s, each cut to that window (flights
         left with fewer than 2 samples are dropped)."""
+        return self.keep_samples(lambda f: (f.t_s >= start_s) & (f.t_s <= end_s))
+
+    def keep_samples(self, keep) -> Flights:
+        """Each flight with only the samples where ``keep(flight)`` ((n,) bool) is true
+        (removed stretches longer than ``max_gap_s`` become gaps); flights left with fewer
+        than 2 samples are dropped; turn rates are recomputed from what is kept."""
         out = []
         for f in self.flights:
-            keep = (f.t_s >= start_s) & (f.t_s <= end_s)
-            if keep.sum() >= 2:
-                out.append(
-                    Flight(
-                        f.id,
-                        f.icao24,
-                        f.callsign,
-                        *(getattr(f, k)[keep] for k in _ARRAYS),
-                        max_gap_s=f.max_gap_s,
-                    )  # fmt: skip
+            k = np.asarray(keep(f), dtype=bool)
+            if k.all():
+                out.append(f)
+            elif k.sum() >= 2:
+                arrays = [getattr(f, name)[k] for name in _ARRAYS]
+                arrays[_ARRAYS.index("turn_rate")] = turn_rates(
+                    f.t_s[k], f.vx[k], f.vy[k], f.max_gap_s
                 )
+                out.append(Flight(f.id, f.icao24, f.callsign, *arrays, max_gap_s=f.max_gap_s))
         return Flights(out, self.frame, self.epoch_s, self.source, self.dropped)
 
     def summary(self) -> dict:

@@ -39,10 +39,9 @@ from pathlib import Path
 import numpy as np
 
 from airspace_sim.errors import UserError
+from airspace_sim.recorded.flights import FOOT_M as FOOT
+from airspace_sim.recorded.flights import KNOT_MS as KNOT
 from airspace_sim.recorded.flights import MAX_GAP_S, Flight, Flights, Frame, turn_rates
-
-KNOT = 1852.0 / 3600.0  #: m/s per knot
-FOOT = 0.3048  #: m per foot
 
 #: s: a longer silence starts a new flight of the same aircraft (``traffic``'s own default
 #: for ``Traffic.assign_id``/``Flight.split``)

@@ -10,6 +10,7 @@ naming file, key and value. The world (:mod:`airspace_sim.world`) consumes a
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 
 @dataclass
@@ -94,6 +95,9 @@ class AircraftSpec:
     controlled: bool = False  #: an RL agent in the PettingZoo env
     max_turn_rate_deg: float = 3.0  #: turn-rate limit in degrees per second
     avoid: bool = True  #: runs the resolver (background traffic may be non-cooperative)
+    #: what a "recorded" autopilot flies (an :class:`airspace_sim.recorded.autopilot.Recording`;
+    #: set from a [recorded] section, never read from a file)
+    recording: Any = None
 
 
 @dataclass
@@ -115,6 +119,27 @@ class TrafficSpec:
 
 
 @dataclass
+class RecordedSpec:
+    """Recorded flights replayed in the world (:mod:`airspace_sim.recorded`,
+    ``docs/real-traffic.md``); their positions are in the local frame every other aircraft
+    of the scenario uses too (metres east and north of the frame centre)."""
+
+    #: trajectory file (OpenSky / traffic CSV, Parquet, JSON; relative to the scenario file),
+    #: or "traffic:NAME" for a sample of the traffic wheel (e.g. "traffic:switzerland")
+    file: str
+    start_s: float = 0.0  #: seconds into the recording (after its first sample) at world time 0
+    centre_lat_deg: float | None = None  #: local frame centre, degrees (default: the data's)
+    centre_lon_deg: float | None = None
+    flights: list[str] = field(default_factory=list)  #: only these ids / icao24 / callsigns
+    min_altitude_ft: float | None = None  #: samples below this altitude are dropped
+    max_altitude_ft: float | None = None  #: samples above this altitude are dropped
+    max_gap_s: float = 60.0  #: longer silences take the aircraft out of the world
+    #: recorded aircraft track the others and run the detection (alerts); they never fly
+    #: the advice
+    track: bool = True
+
+
+@dataclass
 class Scenario:
     """A whole scenario. ``source`` is the file it came from (for error messages)."""
 
@@ -130,6 +155,7 @@ class Scenario:
     resolver: ResolverSpec = field(default_factory=ResolverSpec)
     traffic: TrafficSpec = field(default_factory=TrafficSpec)
     aircraft: list[AircraftSpec] = field(default_factory=list)
+    recorded: RecordedSpec | None = None  #: recorded traffic added to the aircraft
     source: str = "<memory>"
 
     @property
