@@ -221,33 +221,51 @@ def hermite(t, t0, t1, p0, p1, v0, v1):
     return pos, vel / h
 
 
-def turn_rates(t_s, vx, vy, max_gap_s: float = MAX_GAP_S) -> np.ndarray:
-    """(n,) rad/s: the rate of change of the heading ``atan2(vy, vx)`` at each sample.
+def derivative(t_s, values, max_gap_s: float = MAX_GAP_S, angle: bool = False) -> np.ndarray:
+    """(n,) rate of change of ``values`` (n,) at each sample time ``t_s`` (n,) s.
 
-    Central difference ``wrap(h[i+1] − h[i−1]) / (t[i+1] − t[i−1])`` where both neighbours
-    are within ``max_gap_s`` and have a heading, one-sided where only one is, NaN where
-    none is. t_s, vx, vy (n,) s, m/s.
+    Central difference ``(v[i+1] − v[i−1]) / (t[i+1] − t[i−1])`` (differences wrapped to
+    [−π, π) when ``angle``) where both neighbours are within ``max_gap_s`` and finite,
+    one-sided where only one is, NaN where none is.
     """
     t = np.asarray(t_s, float)
-    h = np.arctan2(np.asarray(vy, float), np.asarray(vx, float))
+    v = np.asarray(values, float)
     n = t.size
-    out = np.full(n, np.nan)
     if n < 2:
-        return out
+        return np.full(n, np.nan)
     dt = np.diff(t)
-    dh = wrap_angle(np.diff(h))
-    fwd = np.where(dt <= max_gap_s, dh / dt, np.nan)  # rate over segment i → i+1, (n-1,)
-    has_prev = np.concatenate([[False], np.isfinite(fwd)])
-    has_next = np.concatenate([np.isfinite(fwd), [False]])
-    prev = np.concatenate([[np.nan], fwd])
-    nxt = np.concatenate([fwd, [np.nan]])
+    dv = wrap_angle(np.diff(v)) if angle else np.diff(v)
+    seg = np.where(dt <= max_gap_s, dv / dt, np.nan)  # rate over segment i → i+1, (n-1,)
+    prev = np.concatenate([[np.nan], seg])
+    nxt = np.concatenate([seg, [np.nan]])
     dt_prev = np.concatenate([[np.nan], dt])
     dt_next = np.concatenate([dt, [np.nan]])
-    both = has_prev & has_next
     with np.errstate(invalid="ignore"):
         central = (prev * dt_prev + nxt * dt_next) / (dt_prev + dt_next)
-    out = np.where(both, central, np.where(has_prev, prev, np.where(has_next, nxt, np.nan)))
-    return out
+    has_prev, has_next = np.isfinite(prev), np.isfinite(nxt)
+    return np.where(
+        has_prev & has_next, central, np.where(has_prev, prev, np.where(has_next, nxt, np.nan))
+    )
+
+
+def turn_rates(t_s, vx, vy, max_gap_s: float = MAX_GAP_S) -> np.ndarray:
+    """(n,) rad/s: the rate of change of the heading ``atan2(vy, vx)`` at each sample
+    (:func:`derivative` of the heading, differences wrapped). t_s, vx, vy (n,) s, m/s."""
+    h = np.arctan2(np.asarray(vy, float), np.asarray(vx, float))
+    return derivative(t_s, h, max_gap_s, angle=True)
+
+
+def course_offset_deg(flight) -> float:
+    """Median absolute angle (deg) between the recorded track and the course flown between
+    samples (positions differenced); ~0 for consistent data. Some OpenSky samples carry a
+    track ~100° off the positions for long stretches: read them with
+    ``velocity="positions"``."""
+    dt = np.diff(flight.t_s)
+    ok = dt <= flight.max_gap_s
+    course = np.arctan2(np.diff(flight.y_m), np.diff(flight.x_m))
+    off = np.abs(wrap_angle(course - flight.heading[:-1]))[ok]
+    off = off[np.isfinite(off)]
+    return float(np.degrees(np.median(off))) if off.size else math.nan
 
 
 @dataclass(eq=False)
@@ -333,13 +351,16 @@ class Flights:
         return Flights(out, self.frame, self.epoch_s, self.source, self.dropped)
 
     def summary(self) -> dict:
-        """Counts for a report: flights, samples, time span (s), median sample spacing (s)."""
+        """Counts for a report: flights, samples, time span (s), median sample spacing (s),
+        median over flights of :func:`course_offset_deg`."""
         spacing = [np.median(np.diff(f.t_s)) for f in self.flights]
+        offsets = [course_offset_deg(f) for f in self.flights]
         return {
             "flights": len(self.flights),
             "samples": int(sum(len(f) for f in self.flights)),
             "span_s": float(self.end_s - self.start_s) if self.flights else 0.0,
             "median_spacing_s": float(np.median(spacing)) if spacing else math.nan,
+            "track_vs_course_deg": float(np.nanmedian(offsets)) if offsets else math.nan,
             "dropped_rows": dict(self.dropped),
         }
 

@@ -41,11 +41,21 @@ import numpy as np
 from airspace_sim.errors import UserError
 from airspace_sim.recorded.flights import FOOT_M as FOOT
 from airspace_sim.recorded.flights import KNOT_MS as KNOT
-from airspace_sim.recorded.flights import MAX_GAP_S, Flight, Flights, Frame, turn_rates
+from airspace_sim.recorded.flights import (
+    MAX_GAP_S,
+    Flight,
+    Flights,
+    Frame,
+    derivative,
+    turn_rates,
+)
 
 #: s: a longer silence starts a new flight of the same aircraft (``traffic``'s own default
 #: for ``Traffic.assign_id``/``Flight.split``)
 SPLIT_GAP_S = 600.0
+
+#: where flight velocities come from (:func:`read`'s ``velocity``)
+VELOCITY_SOURCES = ("reported", "positions")
 
 #: column names → (quantity, unit factor to SI) per schema
 SCHEMAS = {
@@ -257,6 +267,7 @@ def read(
     split_gap_s: float = SPLIT_GAP_S,
     max_gap_s: float = MAX_GAP_S,
     min_samples: int = 2,
+    velocity: str = "reported",
 ) -> Flights:
     """Read one file or a list of files of recorded trajectories into :class:`Flights`.
 
@@ -268,7 +279,12 @@ def read(
     max_gap_s : s, shorter silences inside a flight are interpolated over by
         :meth:`Flight.sample`, longer ones are gaps.
     min_samples : flights with fewer samples are dropped (counted in ``dropped``).
+    velocity : ``"reported"`` (from the ground speed and track columns) or ``"positions"``
+        (central differences of the projected positions, :func:`derivative`), for data
+        whose track disagrees with its positions (``Flights.summary()["track_vs_course_deg"]``).
     """
+    if velocity not in VELOCITY_SOURCES:
+        raise UserError(f"recorded: velocity must be one of {VELOCITY_SOURCES}, got {velocity!r}")
     if isinstance(paths, (str, Path)):
         paths = [paths]
     paths = [Path(p) for p in paths]
@@ -312,6 +328,11 @@ def read(
             counts[base] += 1
             fid = base if c["by_id"] and k == 0 else f"{base}-{k}"
             sl = slice(a, b)
+            fvx, fvy = vx[sl], vy[sl]
+            if velocity == "positions":
+                fvx = derivative(t[sl], x[sl], max_gap_s)
+                fvy = derivative(t[sl], y[sl], max_gap_s)
+            rate = turn_rates(t[sl], fvx, fvy, max_gap_s)
             flights.append(
                 Flight(
                     fid,
@@ -320,12 +341,12 @@ def read(
                     t[sl],
                     x[sl],
                     y[sl],
-                    vx[sl],
-                    vy[sl],
-                    turn_rates(t[sl], vx[sl], vy[sl], max_gap_s),
+                    fvx,
+                    fvy,
+                    rate,
                     c["alt"][sl],
-                    max_gap_s=max_gap_s,
-                )  # fmt: skip
+                    max_gap_s,
+                )
             )
     if not flights:
         raise UserError(f"{source}: no flight with at least {max(min_samples, 2)} samples")

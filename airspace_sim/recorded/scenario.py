@@ -46,15 +46,15 @@ def resolve_file(file: str, source: str) -> Path:
 
 
 @functools.lru_cache(maxsize=8)
-def _read_cached(path: str, mtime: float, centre, max_gap_s: float) -> Flights:
+def _read_cached(path: str, mtime: float, centre, max_gap_s: float, velocity: str) -> Flights:
     from airspace_sim.recorded.readers import read
 
-    return read(path, centre=centre, max_gap_s=max_gap_s)
+    return read(path, centre=centre, max_gap_s=max_gap_s, velocity=velocity)
 
 
 def load_flights(spec, source: str = "<memory>") -> Flights:
     """The :class:`Flights` of a :class:`~airspace_sim.scenarios.schema.RecordedSpec`
-    (read once per file, frame and gap: Flights are immutable), with its ``flights``,
+    (read once per file, frame, gap and velocity source: Flights are immutable), with its ``flights``,
     altitude and ``max_gap_s`` selections applied."""
     path = resolve_file(spec.file, source)
     centre = None
@@ -69,7 +69,16 @@ def load_flights(spec, source: str = "<memory>") -> Flights:
         centre = (float(spec.centre_lat_deg), float(spec.centre_lon_deg))
     if not spec.max_gap_s > 0:
         raise UserError(f"{source}: recorded.max_gap_s: expected > 0, got {spec.max_gap_s}")
-    flights = _read_cached(str(path.resolve()), path.stat().st_mtime, centre, spec.max_gap_s)
+    from airspace_sim.recorded.readers import VELOCITY_SOURCES
+
+    if spec.velocity not in VELOCITY_SOURCES:
+        raise UserError(
+            f"{source}: recorded.velocity: expected one of {', '.join(VELOCITY_SOURCES)}, "
+            f"got {spec.velocity!r}"
+        )
+    flights = _read_cached(
+        str(path.resolve()), path.stat().st_mtime, centre, spec.max_gap_s, spec.velocity
+    )
     if spec.flights:
         wanted = set(spec.flights)
         flights = flights.select(lambda f: bool({f.id, f.icao24, f.callsign} & wanted))

@@ -134,6 +134,9 @@ class RecordedSpec:
     min_altitude_ft: float | None = None  #: samples below this altitude are dropped
     max_altitude_ft: float | None = None  #: samples above this altitude are dropped
     max_gap_s: float = 60.0  #: longer silences take the aircraft out of the world
+    #: velocities from the "reported" ground speed and track, or differenced "positions"
+    #: (for data whose track disagrees with its positions)
+    velocity: str = "reported"
     #: recorded aircraft track the others and run the detection (alerts); they never fly
     #: the advice
     track: bool = True
