@@ -144,7 +144,7 @@ def _numbers(df, col: str, path: Path, lo=None, hi=None) -> np.ndarray:
     if out.any():
         r = int(np.flatnonzero(out)[0])
         rng = f"in [{lo:g}, {hi:g}]" if lo is not None and hi is not None else f"≥ {lo:g}"
-        raise UserError(f"{_where(path, r)}, column {col!r}: {vals[r]!r} is not {rng}")
+        raise UserError(f"{_where(path, r)}, column {col!r}: {float(vals[r])!r} is not {rng}")
     return vals
 
 
