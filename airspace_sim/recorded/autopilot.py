@@ -78,7 +78,9 @@ class _Samples:
         i = self.ptr
         j = i + 1
         t0, t1 = self.t[i], self.t[j]
-        present = (t >= self.t[self.first]) & (t <= self.t[self.last]) & (t1 - t0 <= self.max_gap)
+        on_sample = (t == t0) | (t == t1)  # the edges of a gap have data
+        inside = (t >= self.t[self.first]) & (t <= self.t[self.last])
+        present = inside & ((t1 - t0 <= self.max_gap) | on_sample)
         x, vx = hermite(t, t0, t1, self.x[i], self.x[j], self.vx[i], self.vx[j])
         y, vy = hermite(t, t0, t1, self.y[i], self.y[j], self.vy[i], self.vy[j])
         return present, np.stack([x, y], axis=1), np.stack([vx, vy], axis=1)

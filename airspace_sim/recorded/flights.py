@@ -169,7 +169,8 @@ class Flight:
         t = np.asarray(t_s, dtype=float)
         i = np.clip(np.searchsorted(self.t_s, t, side="right"), 1, self.t_s.size - 1)
         inside = (t >= self.t_s[0]) & (t <= self.t_s[-1])
-        return inside & (self.t_s[i] - self.t_s[i - 1] <= self.max_gap_s)
+        on_sample = (t == self.t_s[i]) | (t == self.t_s[i - 1])  # the edges of a gap
+        return inside & ((self.t_s[i] - self.t_s[i - 1] <= self.max_gap_s) | on_sample)
 
     def sample(self, t_s):
         """The trajectory at times ``t_s`` (any shape), s: ``(x_m, y_m, vx, vy)`` arrays.

@@ -125,8 +125,9 @@ class RecordedSpec:
     of the scenario uses too (metres east and north of the frame centre)."""
 
     #: trajectory file (OpenSky / traffic CSV, Parquet, JSON; relative to the scenario file),
-    #: or "traffic:NAME" for a sample of the traffic wheel (e.g. "traffic:switzerland")
-    file: str
+    #: or "traffic:NAME" for a sample of the traffic wheel (e.g. "traffic:switzerland");
+    #: "" (the default): no recorded traffic
+    file: str = ""
     start_s: float = 0.0  #: seconds into the recording (after its first sample) at world time 0
     centre_lat_deg: float | None = None  #: local frame centre, degrees (default: the data's)
     centre_lon_deg: float | None = None
@@ -158,7 +159,7 @@ class Scenario:
     resolver: ResolverSpec = field(default_factory=ResolverSpec)
     traffic: TrafficSpec = field(default_factory=TrafficSpec)
     aircraft: list[AircraftSpec] = field(default_factory=list)
-    recorded: RecordedSpec | None = None  #: recorded traffic added to the aircraft
+    recorded: RecordedSpec = field(default_factory=RecordedSpec)  #: recorded traffic added
     source: str = "<memory>"
 
     @property
