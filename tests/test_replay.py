@@ -8,8 +8,6 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -250,37 +248,37 @@ def test_scenario_mixes_recorded_and_simulated_aircraft(tmp_path):
         World(load(tmp_path / "bad2.toml"))
 
 
-def _cli(*args):
-    return subprocess.run(
-        [sys.executable, "-m", "airspace_sim", "replay", *args],
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
+def _cli(capsys, *args):
+    from airspace_sim.cli import main
+
+    code = main(["replay", *args])
+    out = capsys.readouterr()
+    return code, out.out, out.err
 
 
-def test_cli_replay_reports_json_and_renders(tmp_path):
+def test_cli_replay_reports_json_and_renders(tmp_path, capsys):
     a, b = _crossing()
     _write_csv(tmp_path / "f.csv", [a, b])
     out = tmp_path / "out.json"
     frames = tmp_path / "frames"
-    p = _cli(
+    code, stdout, stderr = _cli(
+        capsys,
         str(tmp_path / "f.csv"), "--velocity", "positions", "--start", "100", "--duration",
         "80", "--json", str(out), "--render", str(frames), "--every", "40", "--gif",
         "--size", "128x128",
     )  # fmt: skip
-    assert p.returncode == 0, p.stderr
+    assert code == 0, stderr
     s = json.loads(out.read_text())
     assert s["steps"] == 80 and s["replay"]["los_pairs"] == 1
     assert s["real_time_factor"] > 0 and s["metrics"]["aircraft"] == 2
     assert (frames / "run.gif").is_file() and s["frames"] == 3
-    assert "replay.los_pairs" in p.stdout
+    assert "replay.los_pairs" in stdout
 
 
-def test_cli_replay_bad_file_is_one_line(tmp_path):
+def test_cli_replay_bad_file_is_one_line(tmp_path, capsys):
     (tmp_path / "bad.csv").write_text("timestamp,icao24,latitude,longitude,groundspeed,track\n"
                                       "2020-01-01,abc,91.5,8,400,90\n")  # fmt: skip
-    p = _cli(str(tmp_path / "bad.csv"))
-    assert p.returncode == 2
-    assert p.stderr.strip().count("\n") == 0
-    assert "bad.csv: row 1 (line 2), column 'latitude'" in p.stderr
+    code, _, stderr = _cli(capsys, str(tmp_path / "bad.csv"))
+    assert code == 2
+    assert stderr.strip().count("\n") == 0
+    assert "bad.csv: row 1 (line 2), column 'latitude'" in stderr

@@ -32,7 +32,7 @@ import math
 import numpy as np
 
 from airspace_sim.avoidance.cpa import cpa_min_ratio
-from airspace_sim.recorded.flights import FOOT_M
+from airspace_sim.recorded.flights import FOOT_M, Timeline
 from airspace_sim.world.bodies import LOS
 
 TURNING_DEG_S = 1.0  #: recorded |ω| at or above this is a turn, deg/s
@@ -81,7 +81,11 @@ class ReplayStats:
         self.lookahead_s = float(w.lookahead)
         self.confirm_steps = int(w.policy.confirm_steps)
         self.vertical_m = float(vertical_ft) * FOOT_M
-        self.recordings = [s.recording if self.real[i] else None for i, s in enumerate(w.specs)]
+        self._members = np.flatnonzero(self.real)
+        recs = [w.specs[i].recording for i in self._members]
+        self._timeline = (
+            Timeline([r.flight for r in recs], [r.offset_s for r in recs]) if recs else None
+        )
         preset = w.tracker_preset
         self.mode_rates = np.asarray(preset.turn_rates, dtype=float)
         self.rule = (
@@ -98,25 +102,16 @@ class ReplayStats:
         self.dt = float(w.dt)
 
     # ----------------------------------------------------------------- per step
-    def _altitudes(self, idx: np.ndarray, t: float) -> np.ndarray:
-        out = np.full(idx.size, np.nan)
-        for a, i in enumerate(idx):
-            r = self.recordings[int(i)]
-            f = r.flight
-            out[a] = np.interp(t + r.offset_s, f.t_s, f.altitude_m)
-        return out
-
-    def _turn_rates(self, idx: np.ndarray, t: float) -> np.ndarray:
-        out = np.full(idx.size, np.nan)
-        for a, i in enumerate(idx):
-            r = self.recordings[int(i)]
-            out[a] = r.flight.turn_rate_at(t + r.offset_s)
-        return out
-
     def observe(self) -> None:
         """Record the world as it is now (after construction or a step)."""
         w = self.world
         t = float(w.time)
+        # recorded turn rate and altitude of every aircraft now (NaN: not recorded)
+        self._rate = np.full(self.n, np.nan)
+        self._alt = np.full(self.n, np.nan)
+        if self._timeline is not None:
+            self._rate[self._members] = self._timeline.linear(t, "turn_rate")
+            self._alt[self._members] = self._timeline.linear(t, "altitude_m")
         real_now = self.real & w.active
         self.ever |= real_now
         self.max_present = max(self.max_present, int(real_now.sum()))
@@ -128,7 +123,7 @@ class ReplayStats:
         keys, i, j = keys[both], i[both], j[both]
         self.los.update(keys, t)
         if keys.size:
-            dz = np.abs(self._altitudes(i, t) - self._altitudes(j, t))
+            dz = np.abs(self._alt[i] - self._alt[j])
             self.los3d.update(keys[~(dz >= self.vertical_m)], t)  # unknown altitude: a loss
         else:
             self.los3d.update(keys, t)
@@ -175,8 +170,7 @@ class ReplayStats:
         self.sq_pos += float(np.einsum("ij,ij->", e, e))
         self.sq_vel += float(np.einsum("ij,ij->", ev, ev))
         self.track_steps += intr.size
-        uniq, inv = np.unique(intr, return_inverse=True)
-        omega = self._turn_rates(uniq, t)[inv]
+        omega = self._rate[intr]
         known = np.isfinite(omega)
         self.sq_rate += float(np.sum((x[known, 4] - omega[known]) ** 2))
         self.rate_steps += int(known.sum())

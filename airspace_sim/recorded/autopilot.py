@@ -4,15 +4,15 @@ Each member carries a :class:`Recording` (``AircraftSpec.recording``: a
 :class:`~airspace_sim.recorded.flights.Flight` and the flight time at world time 0). The
 autopilot is kinematic (:attr:`airspace_sim.parts.Autopilot.kinematic`): at every world
 step it gives each member the velocity that takes its body from where it is to the
-recording's position one step later (cubic Hermite between samples,
-:func:`~airspace_sim.recorded.flights.hermite`), so the pymunk bodies follow the data to
+recording's position one step later (cubic Hermite between samples, as :meth:`Flight.sample`), so the pymunk bodies follow the data to
 rounding and collide, are surveyed and tracked like any other aircraft. A member is in the
 world from the first step at or after its first sample to the last step at or before its
 last one, and out of it during gaps longer than the flight's ``max_gap_s``. No resolver or
 agent steers it.
 
-All members are sampled together from concatenated arrays with one pointer per flight that
-only moves forward (world time only grows): a step costs O(k), not a Python call per flight.
+All members are sampled together by a :class:`~airspace_sim.recorded.flights.Timeline`
+(concatenated arrays, one forward-only pointer per flight): a step costs O(k) array work,
+not a Python call per flight.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ import numpy as np
 
 from airspace_sim.errors import UserError
 from airspace_sim.parts import Autopilot, NoParams
-from airspace_sim.recorded.flights import Flight, hermite
+from airspace_sim.recorded.flights import Flight, Timeline
 from airspace_sim.registry import register
 
 
@@ -34,56 +34,6 @@ class Recording:
 
     flight: Flight
     offset_s: float = 0.0
-
-
-class _Samples:
-    """k flights' samples concatenated, in world time, with a forward-only segment pointer."""
-
-    def __init__(self, recordings: list[Recording]):
-        flights = [r.flight for r in recordings]
-        n = np.array([len(f) for f in flights], dtype=np.int64)
-        self.first = np.concatenate([[0], np.cumsum(n)[:-1]]).astype(np.int64)
-        self.last = self.first + n - 1
-        offsets = np.repeat([r.offset_s for r in recordings], n)
-        cat = lambda name: np.concatenate([getattr(f, name) for f in flights])  # noqa: E731
-        self.t = cat("t_s") - offsets
-        self.x, self.y, self.vx, self.vy = cat("x_m"), cat("y_m"), cat("vx"), cat("vy")
-        self.max_gap = np.array([f.max_gap_s for f in flights], dtype=float)
-        self.ptr = None
-
-    def _seek(self, t: float) -> None:
-        """Move each pointer to the segment holding ``t`` (the last one after the end)."""
-        if self.ptr is None:  # first call: binary search per flight
-            self.ptr = np.array(
-                [
-                    a
-                    + max(
-                        0, min(int(np.searchsorted(self.t[a : b + 1], t, "right")) - 1, b - a - 1)
-                    )
-                    for a, b in zip(self.first, self.last)
-                ],
-                dtype=np.int64,
-            )
-        while True:
-            move = (self.ptr < self.last - 1) & (self.t[np.minimum(self.ptr + 1, self.last)] <= t)
-            if not move.any():
-                return
-            self.ptr += move
-
-    def at(self, t: float):
-        """``(present (k,) bool, positions (k, 2) m, velocities (k, 2) m/s)`` at world
-        time ``t`` s; positions and velocities are the recording's wherever it has two
-        samples around ``t`` (held at the ends)."""
-        self._seek(t)
-        i = self.ptr
-        j = i + 1
-        t0, t1 = self.t[i], self.t[j]
-        on_sample = (t == t0) | (t == t1)  # the edges of a gap have data
-        inside = (t >= self.t[self.first]) & (t <= self.t[self.last])
-        present = inside & ((t1 - t0 <= self.max_gap) | on_sample)
-        x, vx = hermite(t, t0, t1, self.x[i], self.x[j], self.vx[i], self.vx[j])
-        y, vy = hermite(t, t0, t1, self.y[i], self.y[j], self.vy[i], self.vy[j])
-        return present, np.stack([x, y], axis=1), np.stack([vx, vy], axis=1)
 
 
 @register("autopilot", "recorded")
@@ -106,7 +56,7 @@ class RecordedAutopilot(Autopilot):
             recordings.append(rec)
         self.recordings = recordings
         self.dt = float(context.dt)
-        self._samples = _Samples(recordings)
+        self._samples = Timeline([r.flight for r in recordings], [r.offset_s for r in recordings])
         self._cache = (None, None)
         self.modes = None
 

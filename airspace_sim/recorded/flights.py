@@ -222,6 +222,77 @@ def hermite(t, t0, t1, p0, p1, v0, v1):
     return pos, vel / h
 
 
+class Timeline:
+    """k flights sampled together at increasing times, with arrays, not a call per flight.
+
+    flights : k :class:`Flight`; offsets_s : (k,) flight time at timeline time 0 (s). The
+    samples are concatenated once; each flight keeps a pointer to the segment holding the
+    last time asked, which only moves forward, so a query costs O(k) whatever the length
+    of the flights. Times must not decrease from one call to the next.
+    """
+
+    def __init__(self, flights, offsets_s):
+        flights = list(flights)
+        n = np.array([len(f) for f in flights], dtype=np.int64)
+        self.first = np.concatenate([[0], np.cumsum(n)[:-1]]).astype(np.int64)
+        self.last = self.first + n - 1
+        cat = lambda name: np.concatenate([getattr(f, name) for f in flights])  # noqa: E731
+        self.t = cat("t_s") - np.repeat(np.asarray(offsets_s, dtype=float), n)
+        self._columns = {k: cat(k) for k in _ARRAYS if k != "t_s"}
+        self.max_gap = np.array([f.max_gap_s for f in flights], dtype=float)
+        self.ptr = None
+        self._t_last = -math.inf
+
+    def _seek(self, t: float) -> None:
+        if t < self._t_last:
+            raise ValueError(f"Timeline: time went back from {self._t_last} to {t}")
+        self._t_last = t
+        if self.ptr is None:  # first call: one binary search per flight
+            self.ptr = np.array(
+                [
+                    a
+                    + min(
+                        max(int(np.searchsorted(self.t[a : b + 1], t, "right")) - 1, 0), b - a - 1
+                    )
+                    for a, b in zip(self.first, self.last)
+                ],
+                dtype=np.int64,
+            )
+        while True:
+            move = (self.ptr < self.last - 1) & (self.t[np.minimum(self.ptr + 1, self.last)] <= t)
+            if not move.any():
+                return
+            self.ptr += move
+
+    def present(self, t: float) -> np.ndarray:
+        """(k,) bool: the flights with data at time ``t`` (as :meth:`Flight.covered`)."""
+        self._seek(t)
+        i, j = self.ptr, self.ptr + 1
+        t0, t1 = self.t[i], self.t[j]
+        inside = (t >= self.t[self.first]) & (t <= self.t[self.last])
+        return inside & ((t1 - t0 <= self.max_gap) | (t == t0) | (t == t1))
+
+    def at(self, t: float):
+        """``(present (k,) bool, positions (k, 2) m, velocities (k, 2) m/s)`` at time
+        ``t`` s, as :meth:`Flight.sample` (held at the ends, not NaN, where absent)."""
+        present = self.present(t)
+        i, j = self.ptr, self.ptr + 1
+        c = self._columns
+        t0, t1 = self.t[i], self.t[j]
+        x, vx = hermite(t, t0, t1, c["x_m"][i], c["x_m"][j], c["vx"][i], c["vx"][j])
+        y, vy = hermite(t, t0, t1, c["y_m"][i], c["y_m"][j], c["vy"][i], c["vy"][j])
+        return present, np.stack([x, y], axis=1), np.stack([vx, vy], axis=1)
+
+    def linear(self, t: float, name: str) -> np.ndarray:
+        """(k,) column ``name`` (``"turn_rate"``, ``"altitude_m"``, ...) interpolated
+        linearly at time ``t``; NaN where a flight is absent."""
+        present = self.present(t)
+        i, j = self.ptr, self.ptr + 1
+        v = self._columns[name]
+        u = np.clip((t - self.t[i]) / (self.t[j] - self.t[i]), 0.0, 1.0)
+        return np.where(present, v[i] + u * (v[j] - v[i]), np.nan)
+
+
 def derivative(t_s, values, max_gap_s: float = MAX_GAP_S, angle: bool = False) -> np.ndarray:
     """(n,) rate of change of ``values`` (n,) at each sample time ``t_s`` (n,) s.
 
