@@ -13,8 +13,9 @@
   the pair loses separation before it ends or within the look-ahead after; a loss is
   *alerted* if an episode overlapped the look-ahead before it began, and the lead time is
   from that episode's start;
-- **tracks against the recording**: position, velocity and turn-rate errors of the
-  confirmed tracks of real aircraft, against the recording as flown in the world;
+- **tracks against the recording**: position (RMSE, median, 95th percentile), velocity and
+  turn-rate errors of the confirmed tracks of real aircraft, against the recording as
+  flown in the world;
 - **mode identification against the recorded turn rate**: track-seconds of intruders
   turning (|ω| ≥ :data:`TURNING_DEG_S`, recorded) and flying straight (|ω| ≤
   :data:`STRAIGHT_DEG_S`), and how many the tracker flags as a turn (of the right sign for
@@ -35,6 +36,8 @@ from airspace_sim.avoidance.cpa import cpa_min_ratio
 from airspace_sim.recorded.flights import FOOT_M, Timeline
 from airspace_sim.world.bodies import LOS
 
+#: m: bin edges of the track position error histogram (0.2 % wide, 1 m to 10 000 km)
+ERROR_BINS_M = np.geomspace(1.0, 1e7, 8061)
 TURNING_DEG_S = 1.0  #: recorded |ω| at or above this is a turn, deg/s
 STRAIGHT_DEG_S = 0.25  #: recorded |ω| at or below this is straight flight, deg/s
 FLAG_DEG_S = 0.5  #: rule "omega": |Ω̂| at or above this flags a turn, deg/s
@@ -98,6 +101,7 @@ class ReplayStats:
         self.max_present = 0
         self.sq_pos = self.sq_vel = self.sq_rate = 0.0
         self.track_steps = self.rate_steps = 0
+        self.err_hist = np.zeros(ERROR_BINS_M.size + 1, dtype=np.int64)  # + under/overflow
         self.turning = self.turning_flagged = self.straight = self.straight_flagged = 0
         self.dt = float(w.dt)
 
@@ -168,6 +172,10 @@ class ReplayStats:
         e = np.stack([x[:, 0], x[:, 2]], axis=1) - w.positions[intr]
         ev = np.stack([x[:, 1], x[:, 3]], axis=1) - w.velocities[intr]
         self.sq_pos += float(np.einsum("ij,ij->", e, e))
+        self.err_hist += np.bincount(
+            np.searchsorted(ERROR_BINS_M, np.hypot(e[:, 0], e[:, 1])),
+            minlength=self.err_hist.size,
+        )
         self.sq_vel += float(np.einsum("ij,ij->", ev, ev))
         self.track_steps += intr.size
         omega = self._rate[intr]
@@ -215,6 +223,14 @@ class ReplayStats:
             "lead_time_median_s": float(np.median(leads)) if leads else math.nan,
         }
 
+    def _error_quantile(self, q: float) -> float:
+        """Quantile ``q`` of the track position errors (m, to the histogram's 0.2 %)."""
+        total = int(self.err_hist.sum())
+        if not total:
+            return math.nan
+        k = int(np.searchsorted(np.cumsum(self.err_hist), q * total))
+        return float(ERROR_BINS_M[min(k, ERROR_BINS_M.size - 1)])
+
     def report(self) -> dict:
         """The measurements as a flat-ish dict (JSON-ready apart from NaN)."""
         t = float(self.world.time)
@@ -239,6 +255,8 @@ class ReplayStats:
             **self._judge(),
             "track_s": self.track_steps * dt,
             "track_position_rmse_m": rms(self.sq_pos, self.track_steps),
+            "track_position_median_m": self._error_quantile(0.5),
+            "track_position_p95_m": self._error_quantile(0.95),
             "track_velocity_rmse_ms": rms(self.sq_vel, self.track_steps),
             "track_turn_rate_rmse_deg_s": math.degrees(rms(self.sq_rate, self.rate_steps)),
             "mode_rule": self.rule,
