@@ -105,6 +105,10 @@ class Autopilot(ABC):
     #: flies a plan (a route or a heading to keep): ``progress`` is meaningful and the
     #: CDA policy may resume toward ``desired_heading`` after an avoidance manoeuvre
     has_plan: ClassVar[bool] = False
+    #: moves its aircraft itself along given trajectories (recorded traffic): the world
+    #: flies them by :meth:`velocity` instead of by turn rate (no resolver or agent steers
+    #: them) and brings them in and takes them out by :meth:`presence`
+    kinematic: ClassVar[bool] = False
 
     @abstractmethod
     def turn_rate(self, state) -> np.ndarray:
@@ -121,6 +125,18 @@ class Autopilot(ABC):
     @abstractmethod
     def progress(self, state) -> np.ndarray:
         """(k,) planned distance covered so far, m; NaN without a plan."""
+
+    def velocity(self, state) -> np.ndarray:
+        """(k, 2) m/s each member flies over the coming step (rows of members out of the
+        world are ignored). Only with ``kinematic``."""
+        raise NotImplementedError(f"{type(self).__name__} is not kinematic")
+
+    def presence(self, state):
+        """At the time of ``state`` (``state.step · dt``): ``(present (k,) bool, positions
+        (k, 2) m, velocities (k, 2) m/s)``; the world brings in the members that become
+        present at those positions and takes out those that stop being. Only with
+        ``kinematic``."""
+        raise NotImplementedError(f"{type(self).__name__} is not kinematic")
 
 
 class Sensor(ABC):

@@ -98,10 +98,12 @@ def load_scenario(scenario, overrides=()):
 def _as_table(obj):
     """A Scenario as the TOML-like table the loader reads (unset optional fields left out)."""
     if dataclasses.is_dataclass(obj):
+        from airspace_sim.scenarios.loader import INTERNAL_FIELDS
+
         out = {}
         for f in dataclasses.fields(obj):
             v = getattr(obj, f.name)
-            if f.name != "source" and v is not None:
+            if (type(obj).__name__, f.name) not in INTERNAL_FIELDS and v is not None:
                 out[f.name] = _as_table(v)
         return out
     if isinstance(obj, (list, tuple)):

@@ -42,7 +42,7 @@ from airspace_sim.scenarios.overrides import apply_overrides
 from airspace_sim.scenarios.schema import Scenario
 
 #: Fields set by the loader, never read from a file.
-INTERNAL_FIELDS = {("Scenario", "source")}
+INTERNAL_FIELDS = {("Scenario", "source"), ("AircraftSpec", "recording")}
 
 #: Traffic patterns :func:`airspace_sim.scenarios.traffic.build_aircraft` knows.
 TRAFFIC_PATTERNS = ("none", "ring", "random", "encounter")

@@ -16,6 +16,7 @@ numeric field needs its entry there (a test fails without one).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 
 @dataclass
@@ -100,6 +101,9 @@ class AircraftSpec:
     controlled: bool = False  #: an RL agent in the PettingZoo env
     max_turn_rate_deg: float = 3.0  #: turn-rate limit in degrees per second
     avoid: bool = True  #: runs the resolver (background traffic may be non-cooperative)
+    #: what a "recorded" autopilot flies (an :class:`airspace_sim.recorded.autopilot.Recording`;
+    #: set from a [recorded] section, never read from a file)
+    recording: Any = None
 
 
 @dataclass
@@ -138,6 +142,31 @@ class RandomiseSpec:
 
 
 @dataclass
+class RecordedSpec:
+    """Recorded flights replayed in the world (:mod:`airspace_sim.recorded`,
+    ``docs/real-traffic.md``); their positions are in the local frame every other aircraft
+    of the scenario uses too (metres east and north of the frame centre)."""
+
+    #: trajectory file (OpenSky / traffic CSV, Parquet, JSON; relative to the scenario file),
+    #: or "traffic:NAME" for a sample of the traffic wheel (e.g. "traffic:switzerland");
+    #: "" (the default): no recorded traffic
+    file: str = ""
+    start_s: float = 0.0  #: seconds into the recording (after its first sample) at world time 0
+    centre_lat_deg: float | None = None  #: local frame centre, degrees (default: the data's)
+    centre_lon_deg: float | None = None
+    flights: list[str] = field(default_factory=list)  #: only these ids / icao24 / callsigns
+    min_altitude_ft: float | None = None  #: samples below this altitude are dropped
+    max_altitude_ft: float | None = None  #: samples above this altitude are dropped
+    max_gap_s: float = 60.0  #: longer silences take the aircraft out of the world
+    #: velocities from the "reported" ground speed and track, or differenced "positions"
+    #: (for data whose track disagrees with its positions)
+    velocity: str = "reported"
+    #: recorded aircraft track the others and run the detection (alerts); they never fly
+    #: the advice
+    track: bool = True
+
+
+@dataclass
 class Scenario:
     """A whole scenario. ``source`` is the file it came from (for error messages)."""
 
@@ -154,6 +183,7 @@ class Scenario:
     traffic: TrafficSpec = field(default_factory=TrafficSpec)
     randomise: RandomiseSpec = field(default_factory=RandomiseSpec)
     aircraft: list[AircraftSpec] = field(default_factory=list)
+    recorded: RecordedSpec = field(default_factory=RecordedSpec)  #: recorded traffic added
     source: str = "<memory>"
 
     @property

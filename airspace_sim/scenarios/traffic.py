@@ -49,6 +49,10 @@ def build_aircraft(
     """Hand-placed aircraft (copies) followed by the generated traffic, seeded by ``rng``."""
     rng = np.random.default_rng(rng) if not isinstance(rng, np.random.Generator) else rng
     hand = [dataclasses.replace(a, waypoints=list(a.waypoints)) for a in scenario.aircraft]
+    if scenario.recorded.file:
+        from airspace_sim.recorded.scenario import recorded_aircraft
+
+        hand += recorded_aircraft(scenario, taken={a.id for a in hand})
     t = scenario.traffic
     r = scenario.randomise
     phase = 0.0

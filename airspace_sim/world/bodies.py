@@ -83,6 +83,8 @@ class Airspace:
     ----------
     positions : (N, 2) initial positions, m.
     r_safe, nmac, sensor_range : the three radii of the table above, m.
+    in_space : (N,) bool, optional: the aircraft that start in the spaces (default all; the
+        others can come in later with :meth:`add`).
     spatial_hash : index the RANGE space with pymunk's spatial hash (cell size
         ``sensor_range``, 4·N cells) instead of the default bounding-box tree. The LoS and
         NMAC spaces always use the tree. Either gives the same pairs and events; the cost
@@ -104,12 +106,13 @@ class Airspace:
         nmac: float,
         sensor_range: float,
         spatial_hash: bool | None = None,
+        in_space=None,
     ):
         positions = np.asarray(positions, dtype=float).reshape(-1, 2)
         self.n = n = positions.shape[0]
         self.radii = {LOS: r_safe / 2.0, NMAC: nmac / 2.0, RANGE: sensor_range / 2.0}
         self.spatial_hash = bool(spatial_hash)
-        self.in_space = np.ones(n, dtype=bool)
+        self.in_space = np.ones(n, dtype=bool) if in_space is None else np.array(in_space, bool)
         self.pairs = {t: np.zeros(0, dtype=np.int64) for t in SETS}
         self.began = {t: np.zeros((0, 2), dtype=np.int64) for t in SETS}
         primed = self._build(positions, np.zeros((n, 2)))
@@ -260,6 +263,24 @@ class Airspace:
         for t in SETS:
             self._refresh_order(t)
         self._drain(reset_began=False)
+
+    def add(self, indices, positions) -> None:
+        """Put aircraft (k,) that are outside back into the spaces at ``positions`` (k, 2) m;
+        their pairs begin with the next :meth:`step`."""
+        idx = np.atleast_1d(np.asarray(indices, dtype=np.int64))
+        pos = np.asarray(positions, dtype=float).reshape(-1, 2)
+        new = [(int(i), p) for i, p in zip(idx, pos) if not self.in_space[int(i)]]
+        if not new:
+            return
+        for t in SETS:
+            for i, p in new:
+                body = self.bodies[t][i]
+                body.position = (float(p[0]), float(p[1]))
+                body.velocity = (0.0, 0.0)
+                self.spaces[t].add(body, self.shapes[t][i])
+        self.in_space[[i for i, _ in new]] = True
+        for t in SETS:
+            self._refresh_order(t)
 
     def pair_arrays(self, kind: int) -> tuple[np.ndarray, np.ndarray]:
         """Current overlapping pairs of a set as (i, j) int64 arrays, i < j, sorted."""

@@ -119,6 +119,12 @@ class World:
         self._has_plan = np.zeros(n, dtype=bool)
         for members, ap in self.autopilots:
             self._has_plan[members] = ap.has_plan
+        #: (members, autopilot) of the kinematic autopilots (recorded traffic); ``moved``
+        #: (N,) bool marks their aircraft, which no resolver or agent steers
+        self._kinematic = [(m, ap) for m, ap in self.autopilots if ap.kinematic]
+        self.moved = np.zeros(n, dtype=bool)
+        for members, _ in self._kinematic:
+            self.moved[members] = True
         self._read_modes()
         self.sensor = registry.build(
             "sensor", sc.sensor.kind, sc.sensor, dt, params=sc.sensor.params
@@ -134,9 +140,15 @@ class World:
             params=sc.tracker.params,
         )
         self.trackers_on = self.controlled | self.avoid  # ownships that track intruders
-        self.policy = AvoidancePolicy(sc, dt, self.avoid & ~self.controlled, self.trackers_on)
+        self.policy = AvoidancePolicy(
+            sc, dt, self.avoid & ~self.controlled & ~self.moved, self.trackers_on
+        )
         self.metrics_acc = WorldMetrics(n, self.r_safe, self.nmac_distance, dt)
-        self.airspace = Airspace(self.positions, self.r_safe, self.nmac_distance, self.sensor_range)
+        self.active[self.moved] = False  # kinematic aircraft come in where recorded now
+        self._presence()
+        self.airspace = Airspace(
+            self.positions, self.r_safe, self.nmac_distance, self.sensor_range, in_space=self.active
+        )
         self.in_los = np.zeros(n, dtype=bool)
         self.nmac = np.zeros(n, dtype=bool)
         # the phases after motion, for the initial positions (no tracking errors recorded)
@@ -226,6 +238,8 @@ class World:
         mid = self.headings + 0.5 * turn
         chord = self.speeds * np.sinc(turn / (2.0 * np.pi))
         v = chord[:, None] * np.stack([np.cos(mid), np.sin(mid)], axis=1)
+        if self._kinematic:
+            v, turn, rate = self._kinematic_motion(v, turn, rate)
         v[~self.active] = 0.0
         self.airspace.set_velocities(v)
         self.airspace.step(dt, self.positions)
@@ -244,8 +258,47 @@ class World:
         if gone.any():
             self.active[gone] = False
             self.airspace.remove(np.flatnonzero(gone))
+        if self._kinematic:
+            arrive, leave = self._presence()
+            self.airspace.remove(leave)
+            self.airspace.add(arrive, self.positions[arrive])
         self.velocities = self._velocities()
         self._update_contact_flags()
+
+    def _kinematic_motion(self, v, turn, rate):
+        """The kinematic autopilots' aircraft fly their own velocities over the step:
+        ``(v (N, 2) m/s, turn (N,) rad, rate (N,) rad/s)`` with their rows replaced. Their
+        heading becomes the direction of the step flown and their speed its length / dt."""
+        state = self.flight_state()
+        v = v.copy()
+        for members, ap in self._kinematic:
+            v[members] = ap.velocity(state)
+        m = self.moved & self.active
+        speed = np.hypot(v[:, 0], v[:, 1])
+        heading = np.where(m & (speed > 0), np.arctan2(v[:, 1], v[:, 0]), self.headings)
+        turn = np.where(m, wrap_angle(heading - self.headings), turn)
+        self.speeds = np.where(m, speed, self.speeds)
+        return v, turn, np.where(m, turn / self.dt, rate)
+
+    def _presence(self):
+        """Bring in the kinematic autopilots' aircraft that are recorded now and take out
+        those that are not (``active``, and position, heading and speed of the arrivals).
+        Returns ``(arrive, leave)`` (int arrays) for the airspace."""
+        state = self.flight_state()
+        arrive, leave = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
+        for members, ap in self._kinematic:
+            present, pos, vel = ap.presence(state)
+            new = present & ~self.active[members]
+            gone = ~present & self.active[members]
+            a = members[new]
+            self.positions[a] = pos[new]
+            self.headings[a] = np.arctan2(vel[new, 1], vel[new, 0])
+            self.speeds[a] = np.hypot(vel[new, 0], vel[new, 1])
+            self.active[a] = True
+            self.active[members[gone]] = False
+            arrive.append(a)
+            leave.append(members[gone])
+        return np.concatenate(arrive), np.concatenate(leave)
 
     def _update_contact_flags(self) -> None:
         """``in_los`` and ``nmac`` (N,) from the pymunk pair sets."""
@@ -309,8 +362,11 @@ class World:
     # --------------------------------------------------------------- outputs
     @property
     def done(self) -> bool:
-        """Simulated time reached the scenario's duration, or nobody is flying."""
-        return self.step_count >= self.scenario.n_steps or not self.active.any()
+        """Simulated time reached the scenario's duration, or nobody is flying (and, with
+        recorded traffic, which may still arrive, the duration only)."""
+        return self.step_count >= self.scenario.n_steps or not (
+            self.active.any() or self._kinematic
+        )
 
     def run(self, steps: int | None = None) -> dict:
         """Step ``steps`` times (default: until :attr:`done`); return :meth:`metrics`."""
