@@ -15,7 +15,9 @@ average NIS against its χ²(2) band, and how often the IMM flags a turn. A seco
 *turning* when the truth's turn rate is at least :data:`TURNING_DEG_S` in magnitude and
 *straight* when it is below :data:`STRAIGHT_DEG_S`; the IMM *flags a turn* when the
 probability of its turning modes exceeds one half, and the flag has the right sign when its
-turn-rate estimate has the sign of the truth's. Turn rates are counter-clockwise positive.
+turn-rate estimate has the sign of the truth's. A second flag, for any tracker with Ω in
+its state, is the combined estimate ``|Ω̂| ≥`` :data:`RATE_FLAG_DEG_S` (an estimated-rate
+mode also fits straight flight, with Ω̂ ≈ 0, so its probability alone says less). Turn rates are counter-clockwise positive.
 
 Flights are given as arrays (times in seconds, east/north positions in metres in a local
 frame), so any reader can feed this module; the ``evaluate-tracker`` command reads files.
@@ -24,7 +26,7 @@ frame), so any reader can feed this module; the ``evaluate-tracker`` command rea
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
@@ -39,6 +41,8 @@ TURNING_DEG_S = 1.0
 STRAIGHT_DEG_S = 0.25
 #: Window (s) of the slow drift removed when re-timing positions (:func:`retime`).
 RETIME_DRIFT_S = 120.0
+#: The second turn flag: the IMM's combined turn-rate estimate at least this (deg/s).
+RATE_FLAG_DEG_S = 0.5
 #: A recorded gap longer than this (s) splits a flight: the truth is not interpolated across.
 MAX_GAP_S = 30.0
 #: Window (s) of the cubic Savitzky–Golay smoothing of recorded positions (:func:`resample`).
@@ -158,8 +162,16 @@ class Evaluation:
     turning_flagged: float
     turning_flagged_wrong_sign: float
     straight_flagged: float
+    turning_rate_flagged: float
+    straight_rate_flagged: float
     gated: int
     cv_grid: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        """The figures as JSON-ready Python values."""
+        d = asdict(self)
+        d["cv_grid"] = {str(k): v for k, v in self.cv_grid.items()}
+        return d
 
     def lines(self) -> list[str]:
         lo, hi = self.nis_band
@@ -179,6 +191,8 @@ class Evaluation:
             f"  turning seconds flagged as a turn of the right sign "
             f"{100 * self.turning_flagged:.1f}% (wrong sign {100 * self.turning_flagged_wrong_sign:.1f}%);"
             f" straight seconds flagged {100 * self.straight_flagged:.2f}%",
+            f"  by the rate estimate (|Omega| >= {RATE_FLAG_DEG_S:g} deg/s, right sign): turning "
+            f"{100 * self.turning_rate_flagged:.1f}%, straight {100 * self.straight_rate_flagged:.2f}%",
         ]
 
 
@@ -271,7 +285,9 @@ def evaluate(
     turning = ev & (np.abs(omega) >= TURNING_DEG_S)
     straight = ev & (np.abs(omega) < STRAIGHT_DEG_S)
     flagged = p_turn > 0.5
-    right = flagged & (np.sign(est[..., 4]) == np.sign(X[..., 4]))
+    same_sign = np.sign(est[..., 4]) == np.sign(X[..., 4])
+    right = flagged & same_sign
+    by_rate = np.abs(np.degrees(est[..., 4])) >= RATE_FLAG_DEG_S
     e_imm, e_cv = est[..., :4] - X[..., :4], cv - X[..., :4]
     ni = nis[ev & np.isfinite(nis)]
     return Evaluation(
@@ -294,6 +310,8 @@ def evaluate(
         turning_flagged=float(right[turning].mean()),
         turning_flagged_wrong_sign=float((flagged & ~right)[turning].mean()),
         straight_flagged=float(flagged[straight].mean()),
+        turning_rate_flagged=float((by_rate & same_sign)[turning].mean()),
+        straight_rate_flagged=float(by_rate[straight].mean()),
         gated=gated,
         cv_grid=grid,
     )

@@ -60,6 +60,17 @@ from airspace_sim.tracking.slots import Slots
 DEFAULT_GATE_PROBABILITY = 1.0 - 1e-6
 
 
+def gate_threshold(gate_probability: float, m: int = 2) -> float:
+    """The gate on d² = νᵀ S⁻¹ ν for ``gate_probability`` and ``m`` measurement components:
+    the χ²(m) quantile with Pr(d² > gate) = 1 − p (inf for p = 1, no gate). 27.6 for the
+    default 1 − 10⁻⁶ and m = 2."""
+    if gate_probability == 1.0:
+        return float("inf")
+    from scipy.special import chdtri  # lighter to import than scipy.stats
+
+    return float(chdtri(m, 1.0 - gate_probability))
+
+
 def _array(value, name: str, ndim: int | tuple, shape=None) -> np.ndarray:
     try:
         a = np.array(value, dtype=float, order="C")
@@ -215,12 +226,7 @@ class SlotIMM:
             ) from None
         if not (0.0 < p <= 1.0):
             raise UserError(f"IMM gate_probability: must be in (0, 1], got {gate_probability!r}")
-        if p == 1.0:
-            gate_d2 = np.inf
-        else:
-            from scipy.special import chdtri  # lighter to import than scipy.stats
-
-            gate_d2 = float(chdtri(m, 1.0 - p))  # chi-square quantile: Pr(d² > gate) = 1 − p
+        gate_d2 = gate_threshold(p, m)
 
         ct = np.zeros(M, dtype=bool)
         if estimated_turn_rate is not None:
