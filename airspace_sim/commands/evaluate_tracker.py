@@ -79,7 +79,7 @@ def run(args) -> int:
             truths += resample(f.id, f.t_s, f.x_m, f.y_m, period, speed_mps=speed)
         for p in tqdm(chosen, desc=f"sigma={sigma:g} m, {period:g} s", leave=False):
             ev = evaluate(truths, p, sigma, period, seed=args.seed)
-            print("\n".join(ev.lines()))
+            tqdm.write("\n".join(ev.lines()))
             results.append(ev)
     if args.json:
         path = Path(args.json)

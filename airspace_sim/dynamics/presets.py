@@ -354,14 +354,17 @@ def dense_turns(dt: float = 1.0) -> Preset:
 
 
 def turn_rate(dt: float = 1.0) -> Preset:
-    """:func:`realistic`'s filter with two modes: straight flight (CV, Ω pinned at 0) and a
-    coordinated turn at the estimated rate Ω (EKF), Ω a random walk of 0.1 °/s per √s.
+    """Two filter modes: straight flight (CV, Ω pinned at 0) and a coordinated turn at the
+    estimated rate Ω (EKF), Ω a random walk of 1 °/s per √s; σ_a = 1.5 m/s² in the filter;
+    mean sojourn 120 s straight, 30 s turning.
 
-    Straight sojourn 60 s, turn 20 s. As truth the turn mode flies at 2 °/s (left).
+    Tuned on the traffic calibration samples (``docs/tracking.md``: σ_Ω 0.3–3 °/s per √s,
+    σ_a 0.5–2 m/s², three sojourn pairs). As truth the turn mode flies 2 °/s left: this
+    preset is a tracker, not a traffic model.
     """
     base = realistic(dt)
     switch = [[0, 1], [1, 0]]
-    sojourn = (60.0, 20.0)
+    sojourn = (120.0, 30.0)
     return replace(
         base,
         name="turn-rate",
@@ -369,8 +372,10 @@ def turn_rate(dt: float = 1.0) -> Preset:
         transition_matrix=_tup(markov.transition_matrix_from_sojourn(sojourn, dt, switch)),
         sojourn_s=sojourn,
         switch_probabilities=_tup(switch),
+        filter_process_noise=_tup(models.white_noise_acceleration(1.5, dt, base.sigma_turn_rate)),
+        filter_sigma_accel=1.5,
         estimated_turn_rate=(False, True),
-        ct_sigma_turn_rate=math.radians(0.1),
+        ct_sigma_turn_rate=math.radians(1.0),
     )
 
 
