@@ -49,6 +49,11 @@ class Preset:
         truth and of the filters; when given, :meth:`with_` rebuilds ``process_noise`` /
         ``filter_process_noise`` for a new ``dt``. ``sigma_turn_rate`` (rad/s per step) is
         their Ω entry.
+    estimated_turn_rate : optional (M,) bools: the filter's modes whose turn rate is the
+        state's own Ω (an EKF coordinated turn, :mod:`airspace_sim.tracking.coordinated_turn`)
+        instead of the mode's known rate; their Ω is a random walk with
+        ``ct_sigma_turn_rate`` (rad/s per √s) in the filter (Q_ΩΩ = σ² dt). The truth
+        generator flies such a mode at its ``turn_rates`` entry.
 
     Presets without the continuous-time fields (``seed``) hold per-step numbers, as the
     paper does: changing ``dt`` alone keeps Π and Q per step.
@@ -69,6 +74,8 @@ class Preset:
     sigma_accel: float = None
     filter_sigma_accel: float = None
     sigma_turn_rate: float = 0.0
+    estimated_turn_rate: tuple = None
+    ct_sigma_turn_rate: float = 0.0
 
     def __post_init__(self):
         where = f"preset {self.name!r}"
@@ -112,23 +119,49 @@ class Preset:
             set_("sojourn_s", tuple(np.asarray(self.sojourn_s, dtype=float).reshape(-1).tolist()))
         if self.switch_probabilities is not None:
             set_("switch_probabilities", _tup(self.switch_probabilities))
+        if self.estimated_turn_rate is not None:
+            ct = tuple(bool(v) for v in np.asarray(self.estimated_turn_rate).reshape(-1))
+            if len(ct) != M:
+                raise UserError(f"{where}: estimated_turn_rate must have {M} flags, got {len(ct)}")
+            set_("estimated_turn_rate", ct)
 
     @property
     def n_modes(self) -> int:
         return len(self.turn_rates)
 
+    def estimated(self) -> np.ndarray:
+        """(M,) bool: the filter's estimated-rate (EKF coordinated-turn) modes."""
+        if self.estimated_turn_rate is None:
+            return np.zeros(self.n_modes, dtype=bool)
+        return np.asarray(self.estimated_turn_rate, dtype=bool)
+
+    def turning_modes(self) -> np.ndarray:
+        """(M,) bool: the modes that model a turn (a non-zero known rate, or estimated)."""
+        return (np.asarray(self.turn_rates) != 0.0) | self.estimated()
+
+    def mode_names(self) -> tuple:
+        """Names of the modes: ``straight``, ``left 3°/s``, ``right 1.5°/s`` (CCW positive),
+        ``turn`` for an estimated-rate mode."""
+        names = []
+        for w, est in zip(self.turn_rates, self.estimated()):
+            deg = math.degrees(abs(w))
+            side = "left" if w > 0 else "right"
+            names.append("turn" if est else "straight" if w == 0 else f"{side} {deg:.3g}°/s")
+        return tuple(names)
+
     def transitions(self) -> np.ndarray:
         """Per-mode transition matrices ``A_q``, shape (M, 5, 5)."""
-        F = models.transition(np.asarray(self.turn_rates), self.dt)
+        est = self.estimated()
+        F = models.transition(np.where(est, 0.0, np.asarray(self.turn_rates)), self.dt)
         if self.pin_turn_rate:
-            F[:, 4, 4] = 0.0
+            F[~est, 4, 4] = 0.0
         return F
 
     def turn_rate_offsets(self) -> np.ndarray:
         """Per-mode additive offsets ``u_q`` (M, 5): ``X(k+1) = A_q X(k) + u_q``."""
         u = np.zeros((self.n_modes, models.N_STATE))
         if self.pin_turn_rate:
-            u[:, models.TURN_RATE] = self.turn_rates
+            u[:, models.TURN_RATE] = np.where(self.estimated(), 0.0, self.turn_rates)
         return u
 
     def mu0(self) -> np.ndarray:
@@ -148,12 +181,18 @@ class Preset:
         return p / p.sum()
 
     def imm_arguments(self) -> dict:
-        """Keyword arguments for :class:`~airspace_sim.tracking.IMM` except x0, P0, mu0."""
+        """Keyword arguments for :class:`~airspace_sim.tracking.IMM` except x0, P0, mu0
+        (``estimated_turn_rate`` and ``dt`` only for a preset with estimated-rate modes)."""
+        est = self.estimated()
+        Q = np.broadcast_to(np.asarray(self.filter_process_noise), (self.n_modes, 5, 5)).copy()
+        Q[est, 4, 4] = self.ct_sigma_turn_rate**2 * self.dt
+        # the estimated-rate flags and dt only when there are such modes, so the arguments
+        # of a linear model stay those of any linear-Gaussian IMM (filterpy's included)
+        extra = dict(estimated_turn_rate=est, dt=self.dt) if est.any() else {}
         return dict(
+            **extra,
             transitions=self.transitions(),
-            process_noise=np.broadcast_to(
-                np.asarray(self.filter_process_noise), (self.n_modes, 5, 5)
-            ).copy(),
+            process_noise=Q,
             measurement_matrix=models.position_measurement_matrix(),
             measurement_noise=models.measurement_noise(self.measurement_sigma),
             transition_matrix=np.asarray(self.transition_matrix, dtype=float),
@@ -286,7 +325,66 @@ def realistic(dt: float = 1.0) -> Preset:
     )
 
 
-PRESETS = {"seed": seed, "realistic": realistic}
+def dense_turns(dt: float = 1.0) -> Preset:
+    """:func:`realistic` with known-rate turn modes at 0, ±1, ±2, ±3 °/s for the filters and
+    the truth: real airliner turns are mostly 1–2.5 °/s (``docs/tracking.md``).
+
+    Leaving straight flight (mean 60 s) starts any of the six turns; a turn (mean 20 s)
+    ends in straight flight half the time and otherwise changes to the next rate of the
+    same sign (a roll-in or roll-out), so rates change by 1 °/s steps.
+    """
+    base = realistic(dt)
+    rates = [0.0, 1.0, -1.0, 2.0, -2.0, 3.0, -3.0]
+    M = len(rates)
+    switch = np.zeros((M, M))
+    switch[0, 1:] = 1.0 / (M - 1)
+    for i in range(1, M):
+        nxt = [j for j in range(1, M) if rates[j] * rates[i] > 0 and abs(rates[j] - rates[i]) == 1]
+        switch[i, 0] = 1.0 - 0.25 * len(nxt)
+        switch[i, nxt] = 0.25
+    sojourn = (60.0,) + (20.0,) * (M - 1)
+    return replace(
+        base,
+        name="dense-turns",
+        turn_rates=tuple(math.radians(r) for r in rates),
+        transition_matrix=_tup(markov.transition_matrix_from_sojourn(sojourn, dt, switch)),
+        sojourn_s=sojourn,
+        switch_probabilities=_tup(switch),
+    )
+
+
+def turn_rate(dt: float = 1.0) -> Preset:
+    """Two filter modes: straight flight (CV, Ω pinned at 0) and a coordinated turn at the
+    estimated rate Ω (EKF), Ω a random walk of 1 °/s per √s; σ_a = 1.5 m/s² in the filter;
+    mean sojourn 120 s straight, 30 s turning.
+
+    Tuned on the traffic calibration samples (``docs/tracking.md``: σ_Ω 0.3–3 °/s per √s,
+    σ_a 0.5–2 m/s², three sojourn pairs). As truth the turn mode flies 2 °/s left: this
+    preset is a tracker, not a traffic model.
+    """
+    base = realistic(dt)
+    switch = [[0, 1], [1, 0]]
+    sojourn = (120.0, 30.0)
+    return replace(
+        base,
+        name="turn-rate",
+        turn_rates=(0.0, math.radians(2.0)),
+        transition_matrix=_tup(markov.transition_matrix_from_sojourn(sojourn, dt, switch)),
+        sojourn_s=sojourn,
+        switch_probabilities=_tup(switch),
+        filter_process_noise=_tup(models.white_noise_acceleration(1.5, dt, base.sigma_turn_rate)),
+        filter_sigma_accel=1.5,
+        estimated_turn_rate=(False, True),
+        ct_sigma_turn_rate=math.radians(1.0),
+    )
+
+
+PRESETS = {
+    "seed": seed,
+    "realistic": realistic,
+    "dense-turns": dense_turns,
+    "turn-rate": turn_rate,
+}
 
 
 #: (name, factory, dt) -> Preset: a world (and every env reset) asks for the same preset,

@@ -34,6 +34,8 @@ import math
 import numpy as np
 from numba import njit
 
+from airspace_sim.tracking.coordinated_turn import ct_terms
+
 _LOG_2PI = math.log(2.0 * math.pi)
 
 #: Trackers per chunk (SIMD lanes × unroll), a multiple of 8. Larger amortises each small
@@ -107,6 +109,60 @@ def _inv_logdet(S, Si, logdet, L, Li, want_log):
                     Si[j, i, w] = s
 
 
+@njit(cache=True, error_model="numpy")
+def _ct_predict(x0, P0, dt, u, Q, XP, PP, J, FP):
+    """EKF prediction of the estimated-rate coordinated-turn mode (:mod:`.coordinated_turn`)
+    for every lane: x0 (5, W), P0 (5, 5, W) (full) in; XP (5, W) = f(x0) + u,
+    PP (5, 5, W) = J P0 Jᵀ + Q out; J, FP (5, 5, W) work arrays. u (5,), Q (5, 5)."""
+    n = x0.shape[0]
+    W = x0.shape[1]
+    for k in range(n):
+        for l in range(n):
+            for w in range(W):
+                J[k, l, w] = 0.0
+    for w in range(W):
+        vx = x0[1, w]
+        vy = x0[3, w]
+        s, c, ds, dc, co, si = ct_terms(x0[4, w], dt)
+        XP[0, w] = x0[0, w] + s * vx - c * vy + u[0]
+        XP[1, w] = co * vx - si * vy + u[1]
+        XP[2, w] = x0[2, w] + c * vx + s * vy + u[2]
+        XP[3, w] = si * vx + co * vy + u[3]
+        XP[4, w] = x0[4, w] + u[4]
+        J[0, 0, w] = 1.0
+        J[0, 1, w] = s
+        J[0, 3, w] = -c
+        J[0, 4, w] = ds * vx - dc * vy
+        J[1, 1, w] = co
+        J[1, 3, w] = -si
+        J[1, 4, w] = -dt * (si * vx + co * vy)
+        J[2, 1, w] = c
+        J[2, 2, w] = 1.0
+        J[2, 3, w] = s
+        J[2, 4, w] = dc * vx + ds * vy
+        J[3, 1, w] = si
+        J[3, 3, w] = co
+        J[3, 4, w] = dt * (co * vx - si * vy)
+        J[4, 4, w] = 1.0
+    for k in range(n):
+        for l in range(n):
+            for w in range(W):
+                FP[k, l, w] = 0.0
+            for i in range(n):
+                for w in range(W):
+                    FP[k, l, w] += J[k, i, w] * P0[i, l, w]
+    for k in range(n):
+        for l in range(k, n):
+            for w in range(W):
+                PP[k, l, w] = Q[k, l]
+            for i in range(n):
+                for w in range(W):
+                    PP[k, l, w] += FP[k, i, w] * J[l, i, w]
+        for l in range(k):
+            for w in range(W):
+                PP[k, l, w] = PP[l, k, w]
+
+
 def _make_imm_step(W):
     """The IMM step for chunk width W.
 
@@ -116,14 +172,16 @@ def _make_imm_step(W):
 
     @njit(cache=True, error_model="numpy")
     def imm_step(
-        Fr, Fc, Fv, Fnnz, Q, U, Hr, Hc, Hv, R, Pi, gate_d2,
+        Fr, Fc, Fv, Fnnz, Q, U, ct, dt, Hr, Hc, Hv, R, Pi, gate_d2,
         z, alive, xs, Ps, mus,
         x_o, P_o, mu_o, nis_o, ll_o, gated_o,
     ):  # fmt: skip
         """One IMM cycle (paper §IV, steps 1–5) for every live slot.
 
         Model: Fr, Fc, Fv (M, K) row, column and value of the non-zeros of each F_j (the
-        first Fnnz[j] of them); Q (M, n, n) symmetric; U (M, n) offsets; Hr, Hc, Hv (KH,)
+        first Fnnz[j] of them); Q (M, n, n) symmetric; U (M, n) offsets; ct (M,) bool:
+        estimated-rate coordinated-turn modes (n = 5; EKF, :mod:`.coordinated_turn`; their
+        F is not read), dt their step in seconds; Hr, Hc, Hv (KH,)
         the non-zeros of H (m, n); R (m, m) symmetric positive definite; Pi (M, M)
         row-stochastic; gate_d2 the chi-square gate on d² (``inf``: no gate).
 
@@ -145,6 +203,7 @@ def _make_imm_step(W):
         x0 = np.empty((n, W))
         P0 = np.empty((n, n, W))
         FP = np.empty((n, n, W))
+        J = np.empty((n, n, W))
         zc = np.empty((m, W))
         have = np.empty(W, dtype=np.bool_)
         use = np.empty(W, dtype=np.bool_)
@@ -241,15 +300,19 @@ def _make_imm_step(W):
                             P0[k, l, w] = P0[l, k, w]
 
                 # ---- Step 3a: mode-matched prediction x_j = F_j x0j + u_j,
-                #      P_j = F_j P0j F_jᵀ + Q_j, over the non-zeros of F_j
-                for k in range(n):
+                #      P_j = F_j P0j F_jᵀ + Q_j, over the non-zeros of F_j; an
+                #      estimated-rate mode: x_j = f(x0j) + u_j, P_j = J P0j Jᵀ + Q_j (EKF)
+                if ct[j]:
+                    _ct_predict(x0, P0, dt, U[j], Q[j], XP[j], PP[j], J, FP)
+                lin = not ct[j]
+                for k in range(n if lin else 0):
                     u = U[j, k]
                     for w in range(W):
                         XP[j, k, w] = u
                     for l in range(n):
                         for w in range(W):
                             FP[k, l, w] = 0.0
-                for e in range(Fnnz[j]):
+                for e in range(Fnnz[j] if lin else 0):
                     r = Fr[j, e]
                     c = Fc[j, e]
                     v = Fv[j, e]
@@ -258,19 +321,19 @@ def _make_imm_step(W):
                     for l in range(n):
                         for w in range(W):
                             FP[r, l, w] += v * P0[c, l, w]
-                for k in range(n):
+                for k in range(n if lin else 0):
                     for l in range(k, n):
                         for w in range(W):
                             PP[j, k, l, w] = 0.0
                 # (F P Fᵀ)[k, r] = Σ_e F[r, c_e] (F P)[k, c_e], upper triangle k ≤ r
-                for e in range(Fnnz[j]):
+                for e in range(Fnnz[j] if lin else 0):
                     r = Fr[j, e]
                     c = Fc[j, e]
                     v = Fv[j, e]
                     for k in range(r + 1):
                         for w in range(W):
                             PP[j, k, r, w] += FP[k, c, w] * v
-                for k in range(n):
+                for k in range(n if lin else 0):
                     for l in range(k, n):
                         q = Q[j, k, l]
                         for w in range(W):

@@ -60,6 +60,17 @@ from airspace_sim.tracking.slots import Slots
 DEFAULT_GATE_PROBABILITY = 1.0 - 1e-6
 
 
+def gate_threshold(gate_probability: float, m: int = 2) -> float:
+    """The gate on d² = νᵀ S⁻¹ ν for ``gate_probability`` and ``m`` measurement components:
+    the χ²(m) quantile with Pr(d² > gate) = 1 − p (inf for p = 1, no gate). 27.6 for the
+    default 1 − 10⁻⁶ and m = 2."""
+    if gate_probability == 1.0:
+        return float("inf")
+    from scipy.special import chdtri  # lighter to import than scipy.stats
+
+    return float(chdtri(m, 1.0 - gate_probability))
+
+
 def _array(value, name: str, ndim: int | tuple, shape=None) -> np.ndarray:
     try:
         a = np.array(value, dtype=float, order="C")
@@ -176,6 +187,9 @@ class SlotIMM:
         gate_probability: float = DEFAULT_GATE_PROBABILITY,
         kernel: str = "auto",
         capacity: int = 0,
+        estimated_turn_rate=None,
+        dt=None,
+        mode_names=None,
     ):
         F = _array(transitions, "transitions", 3)
         M, n, n2 = F.shape
@@ -212,13 +226,36 @@ class SlotIMM:
             ) from None
         if not (0.0 < p <= 1.0):
             raise UserError(f"IMM gate_probability: must be in (0, 1], got {gate_probability!r}")
-        if p == 1.0:
-            gate_d2 = np.inf
-        else:
-            from scipy.special import chdtri  # lighter to import than scipy.stats
+        gate_d2 = gate_threshold(p, m)
 
-            gate_d2 = float(chdtri(m, 1.0 - p))  # chi-square quantile: Pr(d² > gate) = 1 − p
-
+        ct = np.zeros(M, dtype=bool)
+        if estimated_turn_rate is not None:
+            ct = np.array(estimated_turn_rate, dtype=bool).reshape(-1)
+            if ct.shape != (M,):
+                raise UserError(
+                    f"IMM estimated_turn_rate: expected {M} flags (one per mode), got {ct.size}"
+                )
+        if ct.any():
+            if n != 5:
+                raise UserError(
+                    f"IMM estimated_turn_rate: needs the state [x, vx, y, vy, Ω] (n = 5), got n = {n}"
+                )
+            try:
+                dt = float(dt)
+            except (TypeError, ValueError):
+                raise UserError(
+                    f"IMM dt: estimated-rate modes need the step in seconds, got {dt!r}"
+                ) from None
+            if not (np.isfinite(dt) and dt > 0):
+                raise UserError(f"IMM dt: must be a positive number of seconds, got {dt!r}")
+        self._ct, self._dt = ct, (float("nan") if dt is None else float(dt))
+        names = tuple(f"mode{j}" for j in range(M)) if mode_names is None else tuple(mode_names)
+        if len(names) != M or not all(isinstance(v, str) for v in names):
+            raise UserError(f"IMM mode_names: expected {M} strings, got {mode_names!r}")
+        #: (M,) names of the modes (e.g. ``straight``, ``left 3°/s``)
+        self.mode_names = names
+        self._preset = None
+        self._per_dt: dict = {}
         self._F, self._Q, self._U, self._H, self._R, self._Pi = F, Q, U, H, R, Pi
         self._Fr, self._Fc, self._Fv, self._Fnnz = _nonzeros(F)
         Hr, Hc, Hv, _ = _nonzeros(H[None])
@@ -253,6 +290,11 @@ class SlotIMM:
     # ------------------------------------------------------------------ helpers
     def _choose_kernel(self, kernel: str) -> None:
         generated = None
+        if self._ct.any():
+            # the EKF mode is in the loops kernel only (its Jacobian is per tracker)
+            if kernel == "generated":
+                raise UserError("IMM kernel: 'generated' has no estimated-rate modes; use 'auto'")
+            kernel = "loops"
         if kernel != "loops":
             budget = None if kernel == "generated" else _codegen.AUTO_MAX_PRODUCTS
             generated = _codegen.step_kernel(self._F, self._H, max_products=budget)
@@ -438,20 +480,63 @@ class SlotIMM:
             a[s] = np.nan
         self._gated[s] = False
 
-    def step(self, z) -> None:
+    @classmethod
+    def from_preset(cls, preset, **kwargs) -> SlotIMM:
+        """The preset's matched IMM (:meth:`Preset.imm_arguments`); it can step with any
+        ``dt`` (:meth:`step`). ``kwargs``: ``gate_probability``, ``kernel``, ``capacity``."""
+        imm = cls(**preset.imm_arguments(), mode_names=preset.mode_names(), **kwargs)
+        imm._preset, imm._dt = preset, preset.dt
+        return imm
+
+    def _model_at(self, dt: float):
+        """(Fv, Q, U, Pi) of the preset at step ``dt`` s, cached by ``dt``."""
+        if self._preset is None:
+            raise UserError(
+                "IMM step: dt given, but this IMM was built from matrices; build it with "
+                "IMM.from_preset(...) to step with other time steps"
+            )
+        got = self._per_dt.get(dt)
+        if got is None:
+            a = self._preset.with_(dt=dt).imm_arguments()
+            F = np.asarray(a["transitions"], dtype=float)
+            rows = np.arange(self.M)[:, None]
+            Fv = np.where(np.arange(self._Fr.shape[1]) < self._Fnnz[:, None],
+                          F[rows, self._Fr, self._Fc], 0.0)  # fmt: skip
+            if np.count_nonzero(F) != np.count_nonzero(Fv):
+                raise UserError(f"IMM step: the model at dt={dt!r} s has another sparsity")
+            Q = _check_symmetric(_array(a["process_noise"], "process_noise", 3), "process_noise")
+            Pi = np.asarray(a["transition_matrix"], dtype=float)
+            got = (Fv, Q, np.asarray(a["offsets"], dtype=float), Pi / Pi.sum(1, keepdims=True))
+            if len(self._per_dt) >= 256:  # irregular sampling: keep the cache bounded
+                self._per_dt.clear()
+            self._per_dt[dt] = got
+        return got
+
+    def step(self, z, dt=None) -> None:
         """One IMM cycle (paper §IV steps 1–5) for every live slot.
 
         z : (capacity, m) measurements by slot; a row with any NaN/inf means no measurement
-        (predict only); rows of free slots are not read.
+        (predict only); rows of free slots are not read. dt : seconds since the last step,
+        or None for the model's own step; another ``dt`` needs an IMM built with
+        :meth:`from_preset` (transition matrices, Q and Π are rebuilt for it and cached).
         """
         z = np.ascontiguousarray(z, dtype=float)
         if z.shape != (self.capacity, self.m):
             raise UserError(
                 f"IMM step: z must have shape {(self.capacity, self.m)} (by slot), got {z.shape}"
             )
+        Fv, Q, U, Pi, step_dt = self._Fv, self._Q, self._U, self._Pi, self._dt
+        if dt is not None:
+            step_dt = float(dt)
+            if not (np.isfinite(step_dt) and step_dt > 0):
+                raise UserError(f"IMM step: dt must be a positive number of seconds, got {dt!r}")
+            if step_dt != self._dt:
+                Fv, Q, U, Pi = self._model_at(step_dt)
+        head = (self._Fr, self._Fc, Fv, self._Fnnz, Q, U)
+        if self.kernel == "loops":
+            head = head + (self._ct, step_dt)
         self._kernel(
-            self._Fr, self._Fc, self._Fv, self._Fnnz, self._Q, self._U,
-            self._Hr, self._Hc, self._Hv, self._R, self._Pi, self.gate_threshold,
+            *head, self._Hr, self._Hc, self._Hv, self._R, Pi, self.gate_threshold,
             z, self._slots.alive, self._xs, self._Ps, self._mus,
             self._x, self._P, self._mu, self._nis, self._ll, self._gated,
         )  # fmt: skip
@@ -476,7 +561,19 @@ class SlotIMM:
         from airspace_sim.tracking.prediction import predict_modes_at
 
         xm, Pm = self.modes(slots)
-        return predict_modes_at(self._F, self._Q, self._U, xm, Pm, steps)
+        xs, Ps = predict_modes_at(self._F, self._Q, self._U, xm, Pm, steps)
+        self._predict_ct(xm, Pm, steps, xs, Ps)
+        return xs, Ps
+
+    def _predict_ct(self, xm, Pm, steps, xs, Ps) -> None:
+        """Overwrite the estimated-rate modes' predictions (EKF, :mod:`.coordinated_turn`)
+        in xs (R, M, S, n), Ps (R, M, S, n, n) from xm (R, M, n), Pm (R, M, n, n)."""
+        from airspace_sim.tracking import coordinated_turn
+
+        for j in np.flatnonzero(self._ct):
+            xs[:, j], Ps[:, j] = coordinated_turn.predict(
+                xm[:, j], Pm[:, j], self._Q[j], self._dt, steps
+            )
 
     def __repr__(self) -> str:
         return (
@@ -557,8 +654,12 @@ class IMM:
         offsets=None,
         gate_probability: float = DEFAULT_GATE_PROBABILITY,
         kernel: str = "auto",
+        estimated_turn_rate=None,
+        dt=None,
+        mode_names=None,
+        _slots: SlotIMM = None,
     ):
-        s = SlotIMM(
+        s = _slots or SlotIMM(
             transitions,
             process_noise,
             measurement_matrix,
@@ -567,6 +668,9 @@ class IMM:
             offsets=offsets,
             gate_probability=gate_probability,
             kernel=kernel,
+            estimated_turn_rate=estimated_turn_rate,
+            dt=dt,
+            mode_names=mode_names,
         )
         x0, P0, mu0 = s._initial(x0, P0, mu0, "")
         self._s = s
@@ -574,6 +678,15 @@ class IMM:
         self._identity = True  # rows == arange(B): dense arrays are slices of the slots'
         self._cache: dict = {}
         self._z = np.zeros((0, s.m))
+
+    @classmethod
+    def from_preset(cls, preset, x0, P0, mu0=None, **kwargs) -> IMM:
+        """The preset's matched IMM (:meth:`Preset.imm_arguments`), trackers started at x0
+        (B, 5), P0, mu0 (default the preset's :meth:`~Preset.mu0`); it can step with any
+        ``dt`` (:meth:`step`). ``kwargs``: ``gate_probability``, ``kernel``."""
+        s = SlotIMM.from_preset(preset, **kwargs)
+        return cls(None, None, None, None, None, x0, P0, preset.mu0() if mu0 is None else mu0,
+                   _slots=s)  # fmt: skip
 
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()
@@ -586,6 +699,7 @@ class IMM:
     n = property(lambda self: self._s.n, doc="State dimension.")
     m = property(lambda self: self._s.m, doc="Measurement dimension.")
     kernel = property(lambda self: self._s.kernel, doc="The step kernel in use.")
+    mode_names = property(lambda self: self._s.mode_names, doc="(M,) names of the modes.")
     gate_probability = property(lambda self: self._s.gate_probability)
     gate_threshold = property(lambda self: self._s.gate_threshold, doc="Gate on d² (inf: none).")
 
@@ -654,13 +768,16 @@ class IMM:
         return self._modes()[1]
 
     # ------------------------------------------------------------------ methods
-    def step(self, z) -> None:
+    def step(self, z, dt=None) -> None:
         """One IMM cycle (paper §IV steps 1–5) for every tracker.
 
         Parameters
         ----------
         z : (B, m)
             Measurements; a row with any NaN/inf means no measurement (predict only).
+        dt : float, optional
+            Seconds since the last step (irregular sampling); None for the model's step.
+            Needs an IMM built with :meth:`from_preset` (see :meth:`SlotIMM.step`).
         """
         z = np.asarray(z, dtype=float)
         B, s = self.B, self._s
@@ -672,7 +789,7 @@ class IMM:
             self._z[:B] = z
         else:
             self._z[self._rows] = z
-        s.step(self._z)
+        s.step(self._z, dt)
         self._cache.clear()
 
     def append(self, x0, P0, mu0) -> np.ndarray:
@@ -736,6 +853,8 @@ class IMM:
         Ps = np.empty((B, M, steps, n, n))
         xm, Pm = self._modes()
         _kernels.predict_modes(s._F, s._Q, s._U, np.asarray(xm), np.asarray(Pm), steps, xs, Ps)
+        if steps:
+            s._predict_ct(np.asarray(xm), np.asarray(Pm), np.arange(1, steps + 1), xs, Ps)
         return xs, Ps
 
     def predict_modes_at(self, steps, rows=None):

@@ -1,0 +1,194 @@
+"""The estimated-rate coordinated-turn mode (EKF) against independent references.
+
+- Its Jacobian (``coordinated_turn.transition``) against complex-step derivatives of the
+  closed-form turn written here (exact to rounding, no step-size error).
+- A one-mode IMM with that mode against filterpy's ``ExtendedKalmanFilter`` step by step,
+  and a two-mode IMM (pinned straight + estimated turn) against filterpy's ``IMMEstimator``
+  over an EKF and a ``KalmanFilter``: the EKF's F is set to the complex-step Jacobian of the
+  test's own f at each predict.
+- Irregular sampling: ``step(z, dt)`` equals an IMM built at that dt, bit for bit.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+filterpy = pytest.importorskip("filterpy")
+from filterpy.kalman import ExtendedKalmanFilter, IMMEstimator, KalmanFilter  # noqa: E402
+
+from airspace_sim.dynamics import presets  # noqa: E402
+from airspace_sim.tracking import IMM, coordinated_turn  # noqa: E402
+
+
+def f_ct(x, T):
+    """Coordinated turn at the state's own rate (works on complex x for complex steps)."""
+    px, vx, py, vy, w = x
+    s, c = np.sin(w * T) / w, (1 - np.cos(w * T)) / w
+    return np.array(
+        [px + s * vx - c * vy, np.cos(w * T) * vx - np.sin(w * T) * vy, py + c * vx + s * vy,
+         np.sin(w * T) * vx + np.cos(w * T) * vy, w]
+    )  # fmt: skip
+
+
+def jac_complex_step(x, T, h=1e-30):
+    """Complex-step Jacobian of :func:`f_ct`, in extended precision (so the closed form's
+    cancellation at tiny rates stays below the tolerance)."""
+    J = np.empty((5, 5))
+    for k in range(5):
+        e = np.array(x, dtype=np.clongdouble)
+        e[k] += 1j * h
+        J[:, k] = (f_ct(e, np.longdouble(T)).imag / np.longdouble(h)).astype(float)
+    return J
+
+
+# 3e-4 rad/s over 4 s is just above the series threshold |ΩT| < 1e-3, -1e-4 below it
+@pytest.mark.parametrize("omega", [0.05, -0.02, 3e-4, -1e-4])
+def test_jacobian_matches_complex_step(omega):
+    x = np.array([100.0, 180.0, -50.0, 120.0, omega])
+    fx, J = coordinated_turn.transition(x[None], 4.0)
+    ref = f_ct(np.asarray(x, dtype=np.longdouble), np.longdouble(4.0)).astype(float)
+    np.testing.assert_allclose(fx[0], ref, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(J[0], jac_complex_step(x, 4.0), rtol=1e-9, atol=1e-9)
+
+
+class CTEKF(ExtendedKalmanFilter):
+    """filterpy EKF with the test's coordinated turn; ``update(z)`` with a linear H."""
+
+    def __init__(self, T, Q, H, R, x0, P0):
+        super().__init__(dim_x=5, dim_z=2)
+        self.T, self.Q, self.R, self.Hm = T, Q.copy(), R.copy(), H.copy()
+        self.x, self.P = x0[:, None].copy(), P0.copy()
+
+    def predict_x(self, u=0):
+        self.x = f_ct(self.x[:, 0], self.T)[:, None]
+
+    def predict(self, u=0):
+        self.F = jac_complex_step(self.x[:, 0], self.T)
+        super().predict(u)
+
+    def update(self, z):
+        super().update(z, lambda x: self.Hm, lambda x: self.Hm @ x)
+
+
+def turning_measurements(rng, K, T, sigma):
+    x = np.array([0.0, 150.0, 0.0, 60.0, math.radians(2.0)])
+    zs = []
+    for k in range(K):
+        if k == K // 2:
+            x[4] = -math.radians(1.0)
+        x = f_ct(x, T)
+        zs.append(x[[0, 2]] + sigma * rng.standard_normal(2))
+    return np.array(zs)
+
+
+def scaled_close(x, P, rx, rP):
+    s = np.sqrt(np.diag(rP))
+    np.testing.assert_allclose(x / s, rx / s, rtol=1e-7, atol=1e-9)
+    np.testing.assert_allclose(P / np.outer(s, s), rP / np.outer(s, s), rtol=1e-7, atol=1e-9)
+
+
+def test_one_mode_equals_filterpy_ekf():
+    rng = np.random.default_rng(3)
+    T, sigma = 2.0, 40.0
+    p = presets.get("turn-rate", dt=T).with_(measurement_sigma=sigma)
+    a = p.imm_arguments()
+    j = 1  # the estimated-rate mode alone
+    args = dict(
+        transitions=a["transitions"][j : j + 1], process_noise=a["process_noise"][j : j + 1],
+        measurement_matrix=a["measurement_matrix"], measurement_noise=a["measurement_noise"],
+        transition_matrix=[[1.0]], estimated_turn_rate=[True], dt=T, gate_probability=1.0,
+    )  # fmt: skip
+    x0 = np.array([0.0, 140.0, 10.0, 70.0, 0.01])
+    P0 = np.diag([50.0**2, 20.0**2, 50.0**2, 20.0**2, 0.02**2])
+    imm = IMM(**args, x0=x0[None], P0=P0, mu0=[1.0])
+    ref = CTEKF(T, a["process_noise"][j], a["measurement_matrix"], a["measurement_noise"], x0, P0)
+    for z in turning_measurements(rng, 60, T, sigma):
+        imm.step(z[None])
+        ref.predict()
+        ref.update(z[:, None])
+        scaled_close(imm.x[0], imm.P[0], ref.x[:, 0], ref.P)
+
+
+def test_straight_and_estimated_turn_equal_filterpy_imm():
+    rng = np.random.default_rng(4)
+    T, sigma = 1.0, 50.0
+    p = presets.get("turn-rate", dt=T)
+    a = p.imm_arguments()
+    x0 = np.array([0.0, 150.0, 0.0, 60.0, 0.005])
+    P0 = np.diag([50.0**2, 30.0**2, 50.0**2, 30.0**2, 0.01**2])
+    mu0 = np.array([0.6, 0.4])
+    imm = IMM(**a, x0=x0[None], P0=P0, mu0=mu0, gate_probability=1.0)
+    assert imm.kernel == "loops"
+    assert IMM.from_preset(p, x0[None], P0).mode_names == ("straight", "turn")
+    kf = KalmanFilter(dim_x=5, dim_z=2, dim_u=1)
+    kf.F, kf.Q = a["transitions"][0].copy(), a["process_noise"][0].copy()
+    kf.H, kf.R = a["measurement_matrix"].copy(), a["measurement_noise"].copy()
+    kf.B = a["offsets"][0][:, None].copy()
+    kf.x, kf.P = x0[:, None].copy(), P0.copy()
+    ekf = CTEKF(T, a["process_noise"][1], a["measurement_matrix"], a["measurement_noise"], x0, P0)
+    ref = IMMEstimator([kf, ekf], mu0.copy(), a["transition_matrix"].copy())
+    for z in turning_measurements(rng, 120, T, sigma):
+        imm.step(z[None])
+        ref.predict(u=np.ones((1, 1)))
+        ref.update(z[:, None])
+        scaled_close(imm.x[0], imm.P[0], ref.x[:, 0], ref.P)
+        np.testing.assert_allclose(imm.mu[0], ref.mu, rtol=1e-7, atol=1e-12)
+    # the turn mode's own rate estimate follows the second half's -1 deg/s
+    assert abs(math.degrees(imm.x_modes[0, 1, 4]) + 1.0) < 0.3
+
+
+@pytest.mark.parametrize("name", ["realistic", "turn-rate"])
+def test_step_with_dt_equals_model_built_at_dt(name):
+    rng = np.random.default_rng(5)
+    p = presets.get(name)
+    x0 = np.array([[0.0, 150.0, 0.0, 60.0, 0.0]] * 3)
+    P0 = np.diag([50.0**2, 30.0**2, 50.0**2, 30.0**2, 1e-4])
+    dts = rng.uniform(0.5, 6.0, 8)
+    irregular = IMM.from_preset(p, x0, P0)
+    zs = rng.normal(0, 50, (dts.size, 3, 2)) + 150.0 * np.cumsum(dts)[:, None, None]
+    for dt, z in zip(dts, zs):
+        irregular.step(z, dt=dt)
+    # step by step against IMMs built for each dt from the same posteriors: equal bits
+    ref = IMM.from_preset(p, x0, P0, kernel=irregular.kernel)
+    s = ref.slots
+    for dt, z in zip(dts, zs):
+        a = p.with_(dt=dt).imm_arguments()
+        other = IMM(**a, x0=x0, P0=P0, mu0=p.mu0(), kernel=irregular.kernel)
+        other.slots._xs[...] = s._xs
+        other.slots._Ps[...] = s._Ps
+        other.slots._mus[...] = s._mus
+        other.step(z)
+        ref.step(z, dt=dt)
+        np.testing.assert_array_equal(ref.x, other.x)
+        np.testing.assert_array_equal(ref.P, other.P)
+    np.testing.assert_array_equal(ref.x, irregular.x)
+
+
+def test_dt_needs_a_preset():
+    from airspace_sim.errors import UserError
+
+    p = presets.get("realistic")
+    imm = IMM(**p.imm_arguments(), x0=np.zeros((1, 5)), P0=np.eye(5), mu0=p.mu0())
+    with pytest.raises(UserError, match="from_preset"):
+        imm.step(np.zeros((1, 2)), dt=2.0)
+
+
+def test_predict_modes_at_uses_the_ekf_for_the_turn_mode():
+    p = presets.get("turn-rate")
+    x0 = np.array([[0.0, 150.0, 0.0, 60.0, 0.02]])
+    P0 = np.diag([50.0**2, 30.0**2, 50.0**2, 30.0**2, 1e-4])
+    imm = IMM.from_preset(p, x0, P0)
+    xs, Ps = imm.predict_modes_at(np.array([3, 10]))
+    a = p.imm_arguments()
+    ekf = CTEKF(p.dt, a["process_noise"][1], a["measurement_matrix"], a["measurement_noise"],
+                x0[0], P0)  # fmt: skip
+    for k in range(1, 11):
+        ekf.predict()
+        if k in (3, 10):
+            i = (3, 10).index(k)
+            scaled_close(xs[0, 1, i], Ps[0, 1, i], ekf.x[:, 0], ekf.P)
+    xs2, Ps2 = imm.predict_modes(10)
+    np.testing.assert_allclose(xs2[0, 1, 9], xs[0, 1, 1], rtol=1e-12)
