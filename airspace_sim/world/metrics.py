@@ -50,7 +50,7 @@ Safety-assurance metrics (DAIDALUS / ACAS X study conventions; ``docs/safety.md`
   never arrives), ``arrival_delay_mean_s`` / ``arrival_delay_max_s`` over the arrived:
   arrival time minus the planned straight time ``plan length / speed`` (a route is
   captured within one step's travel of its last waypoint, so an undisturbed flight has a
-  delay in ``(−dt, 0]``); NaN when none arrived.
+  delay in ``[−dt, 0]``); NaN when none arrived.
 
 The risk ratio (NMACs with the resolver over NMACs without, same seeds) needs two runs:
 :func:`airspace_sim.world.risk.risk_ratio`.
