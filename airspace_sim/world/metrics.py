@@ -28,8 +28,8 @@ Definitions (units SI; ``d`` a true centre distance between two aircraft):
 
 Safety-assurance metrics (DAIDALUS / ACAS X study conventions; ``docs/safety.md``):
 
-- well clear: a pair violates the horizontal DAA well clear (DWC) of DO-365 (RTCA, 2017,
-  §2.2.4.3.1 and Appendix C; DAIDALUS ``WCV_TAUMOD``) when ``d ≤ DMOD``, or when it is
+- well clear: a pair violates the horizontal DAA well clear (DWC) of DO-365 (RTCA, 2017, its DAA
+  Well Clear definition; DAIDALUS ``WCV_TAUMOD``) when ``d ≤ DMOD``, or when it is
   closing (``s·v < 0``) with modified tau ``τ_mod = (DMOD² − d²)/(s·v) ≤ τ*_mod`` and
   horizontal miss distance at CPA ``HMD ≤ HMD*``; ``s, v`` relative position and velocity
   (true states). DO-365's horizontal values: ``DMOD = HMD* = 4000 ft = 1219.2 m``,
@@ -61,6 +61,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from airspace_sim.world.bodies import LOS, NMAC, RANGE
 
@@ -68,6 +69,51 @@ from airspace_sim.world.bodies import LOS, NMAC, RANGE
 DMOD_M = 1219.2  # 4000 ft
 HMD_M = 1219.2  # 4000 ft
 TAU_MOD_S = 35.0
+
+
+@njit(cache=True, error_model="numpy")
+def _pair_scan(
+    pos, vel, active, following, dmod2, hmd2, tau_mod, r_safe2, lookahead, prev, now, ever,
+    predicted,
+):  # fmt: skip
+    """Well clear and unresolved-conflict flags of every pair i < j (row by row) at one
+    instant: ``now`` (P,) set to the pairs violating well clear (``ever`` or-ed with it);
+    ``predicted`` set where both aircraft flew their own plan in the last step and their
+    straight-line closest approach within ``lookahead`` s is under √r_safe2. pos, vel
+    (N, 2) m, m/s; active, following (N,) bool; squared thresholds m², τ s. Returns
+    (episodes begun: pairs in ``now`` not in ``prev``, pairs in ``now``)."""
+    n = pos.shape[0]
+    k = -1
+    events = 0
+    count = 0
+    for i in range(n):
+        for j in range(i + 1, n):
+            k += 1
+            now[k] = False
+            if not (active[i] and active[j]):
+                continue
+            sx, sy = pos[j, 0] - pos[i, 0], pos[j, 1] - pos[i, 1]
+            vx, vy = vel[j, 0] - vel[i, 0], vel[j, 1] - vel[i, 1]
+            ss = sx * sx + sy * sy
+            sv = sx * vx + sy * vy
+            vv = vx * vx + vy * vy
+            wcv = ss <= dmod2
+            if not wcv and sv < 0.0:  # closing, so vv > 0
+                if (dmod2 - ss) / sv <= tau_mod:
+                    wcv = ss - sv * sv / vv <= hmd2
+            if wcv:
+                now[k] = True
+                ever[k] = True
+                count += 1
+                if not prev[k]:
+                    events += 1
+            if not predicted[k] and not following[i] and not following[j]:
+                tc = 0.0
+                if vv > 0.0:
+                    tc = min(max(-sv / vv, 0.0), lookahead)
+                if ss + 2.0 * tc * sv + tc * tc * vv < r_safe2:
+                    predicted[k] = True
+    return events, count
 
 
 class WorldMetrics:
@@ -105,11 +151,12 @@ class WorldMetrics:
         self.mode_hits = 0
         self.mode_samples = 0
         self._prev_conflict = np.zeros(n, dtype=bool)
-        # safety(): per unordered pair (upper-triangle order of np.triu_indices(n, 1))
-        self._pi, self._pj = np.triu_indices(n, 1)
-        self._wcv_now = np.zeros(self._pi.size, dtype=bool)
-        self._wcv_ever = np.zeros(self._pi.size, dtype=bool)
-        self._predicted = np.zeros(self._pi.size, dtype=bool)  # unresolved conflict seen
+        # safety(): flags per unordered pair i < j, row by row (np.triu_indices order)
+        pairs = n * (n - 1) // 2
+        self._wcv_now = np.zeros(pairs, dtype=bool)
+        self._wcv_prev = np.zeros(pairs, dtype=bool)
+        self._wcv_ever = np.zeros(pairs, dtype=bool)
+        self._predicted = np.zeros(pairs, dtype=bool)  # an unresolved conflict was seen
         self.wcv_events = 0
         self.wcv_pair_steps = 0
         self.induced_keys: set[int] = set()
@@ -195,8 +242,8 @@ class WorldMetrics:
 
         time : s; positions (N, 2) m, velocities (N, 2) m/s, true; active (N,) bool;
         following (N,) bool, flew the CDA policy in the step just flown; lookahead_s : s,
-        the resolver's look-ahead. All unordered pairs of active aircraft, vectorised
-        (N(N−1)/2 per step).
+        the resolver's look-ahead. All unordered pairs of active aircraft (N(N−1)/2 per
+        step, one numba pass, :func:`_pair_scan`).
         """
         first = self._safety_calls == 0
         self._safety_calls += 1
@@ -207,36 +254,31 @@ class WorldMetrics:
         self._was_active = active.copy()
         self._active = self._was_active
 
-        n = max(self.n, 1)
-        both = np.flatnonzero(active[self._pi] & active[self._pj])
-        i, j = self._pi[both], self._pj[both]
-        s = positions[j] - positions[i]
-        v = velocities[j] - velocities[i]
-        ss = np.einsum("ij,ij->i", s, s)
-        sv = np.einsum("ij,ij->i", s, v)
-        vv = np.einsum("ij,ij->i", v, v)
-        closing = sv < 0
-        safe_vv = np.where(vv > 0, vv, 1.0)
-        hmd2 = np.where(vv > 0, ss - sv * sv / safe_vv, ss)
-        tau = np.where(closing, (self.dmod**2 - ss) / np.where(closing, sv, -1.0), np.inf)
-        wcv = (ss <= self.dmod**2) | (closing & (tau <= self.tau_mod) & (hmd2 <= self.hmd**2))
-        now = np.zeros_like(self._wcv_now)
-        now[both[wcv]] = True
-        self.wcv_events += int(np.count_nonzero(now & ~self._wcv_now))
-        self.wcv_pair_steps += int(np.count_nonzero(now))
-        self._wcv_now = now
-        self._wcv_ever |= now
-
         if not first and self._los_began.size:
-            # pair index in triu order of (a, b), a < b
+            # pair index in the kernel's order (i < j, row by row) of (a, b), a < b
             a, b = self._los_began[:, 0], self._los_began[:, 1]
             idx = a * (2 * self.n - a - 1) // 2 + (b - a - 1)
             fresh = ~self._predicted[idx]
-            self.induced_keys.update(int(k) for k in (a * n + b)[fresh])
-        calm = ~following[i] & ~following[j]
-        tc = np.clip(-sv / safe_vv, 0.0, float(lookahead_s))
-        d2 = ss + 2.0 * tc * sv + tc * tc * vv
-        self._predicted[both[calm & (d2 < self.r_safe**2)]] = True
+            self.induced_keys.update(int(k) for k in (a * max(self.n, 1) + b)[fresh])
+        prev, now = self._wcv_now, self._wcv_prev  # reuse the older buffer
+        events, count = _pair_scan(
+            np.ascontiguousarray(positions, dtype=float),
+            np.ascontiguousarray(velocities, dtype=float),
+            np.ascontiguousarray(active, dtype=np.bool_),
+            np.ascontiguousarray(following, dtype=np.bool_),
+            self.dmod**2,
+            self.hmd**2,
+            self.tau_mod,
+            self.r_safe**2,
+            float(lookahead_s),
+            prev,
+            now,
+            self._wcv_ever,
+            self._predicted,
+        )
+        self._wcv_prev, self._wcv_now = prev, now
+        self.wcv_events += events
+        self.wcv_pair_steps += count
 
     def tracking(self, track_pos, true_pos, mode_est=None, mode_true=None):
         """Add (P, 2) estimated vs true positions; optional (Q,) modes to compare."""
