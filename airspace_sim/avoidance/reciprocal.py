@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from airspace_sim.avoidance.resolvers import BandsResolver, ResolverOutput, _arrays
+from airspace_sim.avoidance.resolvers import BandsResolver
 from airspace_sim.parts import param
 
 
@@ -31,27 +31,6 @@ class ReciprocalBandsResolver(BandsResolver):
             0.5, doc="fraction of the avoidance this ownship takes (1: bands)", gt=0, le=1
         )
 
-    def resolve(
-        self,
-        own_velocity,
-        rel_position,
-        rel_velocity,
-        valid,
-        max_heading_change,
-        *,
-        mode_predictions=None,
-        turn_rate=None,
-    ):
-        vo, r, v, valid, mx = _arrays(
-            own_velocity, rel_position, rel_velocity, valid, max_heading_change
-        )
-        res = self._search(vo / self.params.share, r, v, valid, mx, self.params.r_safe, turn_rate)
-        return ResolverOutput(
-            res.heading_change,
-            res.conflict,
-            res.candidates,
-            res.band,
-            min_ratio=res.min_ratio,
-            first_clear=res.first_clear,
-            best_blocked=res.best_blocked,
-        )
+    def _search(self, vo, r, v, valid, mx, r_safe, turn_rate=None):
+        # the ownship's velocity scaled by 1/share, relative velocities as tracked
+        return super()._search(vo / self.params.share, r, v, valid, mx, r_safe, turn_rate)
