@@ -369,3 +369,9 @@ def build_resolver(scenario):
     from airspace_sim.scenarios.loader import resolver_params
 
     return registry.build("resolver", scenario.resolver.kind, params=resolver_params(scenario))
+
+
+# resolvers kept in their own modules: registered here so that importing this one is enough
+from airspace_sim.avoidance.reciprocal import ReciprocalBandsResolver  # noqa: E402
+
+registry.register("resolver", "bands-reciprocal")(ReciprocalBandsResolver)

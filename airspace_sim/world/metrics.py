@@ -25,6 +25,35 @@ Definitions (units SI; ``d`` a true centre distance between two aircraft):
   ``mode_accuracy``: fraction of (track, step) samples of Markov intruders whose most
   probable IMM mode equals the intruder's true mode (NaN if there were none);
   ``track_steps``: number of (track, step) samples.
+
+Safety-assurance metrics (DAIDALUS / ACAS X study conventions; ``docs/safety.md``):
+
+- well clear: a pair violates the horizontal DAA well clear (DWC) of DO-365 (RTCA, 2017, its DAA
+  Well Clear definition; DAIDALUS ``WCV_TAUMOD``) when ``d ≤ DMOD``, or when it is
+  closing (``s·v < 0``) with modified tau ``τ_mod = (DMOD² − d²)/(s·v) ≤ τ*_mod`` and
+  horizontal miss distance at CPA ``HMD ≤ HMD*``; ``s, v`` relative position and velocity
+  (true states). DO-365's horizontal values: ``DMOD = HMD* = 4000 ft = 1219.2 m``,
+  ``τ*_mod = 35 s`` (its ``h* = 450 ft`` is vertical; this world is 2D). ``wcv_events``:
+  episodes (a pair entering violation); ``wcv_pairs``: distinct pairs; ``wcv_duration_s``:
+  pair-seconds in violation, sampled at step instants.
+- ``induced_los_pairs``: LoS pairs never predicted in conflict before their loss began by
+  the *unresolved* straight-line prediction: from true states, at a step after which
+  neither aircraft was flying the CDA policy (advice or hold) in the step just flown, the
+  pair's closest approach within the resolver's look-ahead is ``< r_safe``. A loss the
+  resolver's manoeuvres brought about, not one it failed to prevent. Pairs in LoS at the
+  start are never induced.
+- ``alerts_per_flight_hour``: ``alerts`` / ``flight_hours`` (Σ over aircraft of the time
+  flown, h; NaN when nothing flew); ``first_alert_s``: simulated time of the first alert
+  of the run (NaN if none).
+- arrival, over aircraft with a plan: ``arrived`` (left the world at the end of their
+  route), ``not_arrived`` (still flying at the end of the run; a ``straight`` autopilot
+  never arrives), ``arrival_delay_mean_s`` / ``arrival_delay_max_s`` over the arrived:
+  arrival time minus the planned straight time ``plan length / speed`` (a route is
+  captured within one step's travel of its last waypoint, so an undisturbed flight has a
+  delay in ``[−dt, 0]``); NaN when none arrived.
+
+The risk ratio (NMACs with the resolver over NMACs without, same seeds) needs two runs:
+:func:`airspace_sim.world.risk.risk_ratio`.
 """
 
 from __future__ import annotations
@@ -32,8 +61,59 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from airspace_sim.world.bodies import LOS, NMAC, RANGE
+
+#: DO-365 horizontal well-clear thresholds (module docstring): m, m, s
+DMOD_M = 1219.2  # 4000 ft
+HMD_M = 1219.2  # 4000 ft
+TAU_MOD_S = 35.0
+
+
+@njit(cache=True, error_model="numpy")
+def _pair_scan(
+    pos, vel, active, following, dmod2, hmd2, tau_mod, r_safe2, lookahead, prev, now, ever,
+    predicted,
+):  # fmt: skip
+    """Well clear and unresolved-conflict flags of every pair i < j (row by row) at one
+    instant: ``now`` (P,) set to the pairs violating well clear (``ever`` or-ed with it);
+    ``predicted`` set where both aircraft flew their own plan in the last step and their
+    straight-line closest approach within ``lookahead`` s is under √r_safe2. pos, vel
+    (N, 2) m, m/s; active, following (N,) bool; squared thresholds m², τ s. Returns
+    (episodes begun: pairs in ``now`` not in ``prev``, pairs in ``now``)."""
+    n = pos.shape[0]
+    k = -1
+    events = 0
+    count = 0
+    for i in range(n):
+        for j in range(i + 1, n):
+            k += 1
+            now[k] = False
+            if not (active[i] and active[j]):
+                continue
+            sx, sy = pos[j, 0] - pos[i, 0], pos[j, 1] - pos[i, 1]
+            vx, vy = vel[j, 0] - vel[i, 0], vel[j, 1] - vel[i, 1]
+            ss = sx * sx + sy * sy
+            sv = sx * vx + sy * vy
+            vv = vx * vx + vy * vy
+            wcv = ss <= dmod2
+            if not wcv and sv < 0.0:  # closing, so vv > 0
+                if (dmod2 - ss) / sv <= tau_mod:
+                    wcv = ss - sv * sv / vv <= hmd2
+            if wcv:
+                now[k] = True
+                ever[k] = True
+                count += 1
+                if not prev[k]:
+                    events += 1
+            if not predicted[k] and not following[i] and not following[j]:
+                tc = 0.0
+                if vv > 0.0:
+                    tc = min(max(-sv / vv, 0.0), lookahead)
+                if ss + 2.0 * tc * sv + tc * tc * vv < r_safe2:
+                    predicted[k] = True
+    return events, count
 
 
 class WorldMetrics:
@@ -42,8 +122,18 @@ class WorldMetrics:
     n aircraft; r_safe, nmac : separation and NMAC distances, m; dt : world step, s.
     """
 
-    def __init__(self, n: int, r_safe: float, nmac: float, dt: float):
+    def __init__(
+        self,
+        n: int,
+        r_safe: float,
+        nmac: float,
+        dt: float,
+        dmod: float = DMOD_M,
+        hmd: float = HMD_M,
+        tau_mod: float = TAU_MOD_S,
+    ):
         self.n, self.r_safe, self.nmac, self.dt = n, float(r_safe), float(nmac), float(dt)
+        self.dmod, self.hmd, self.tau_mod = float(dmod), float(hmd), float(tau_mod)
         self.flown = np.zeros(n)  # m flown per aircraft
         self._prev_contacts = None  # positions, LoS and NMAC keys at the previous step
         self.los_events = 0
@@ -61,6 +151,23 @@ class WorldMetrics:
         self.mode_hits = 0
         self.mode_samples = 0
         self._prev_conflict = np.zeros(n, dtype=bool)
+        # safety(): flags per unordered pair i < j, row by row (np.triu_indices order)
+        pairs = n * (n - 1) // 2
+        self._wcv_now = np.zeros(pairs, dtype=bool)
+        self._wcv_prev = np.zeros(pairs, dtype=bool)
+        self._wcv_ever = np.zeros(pairs, dtype=bool)
+        self._predicted = np.zeros(pairs, dtype=bool)  # an unresolved conflict was seen
+        self.wcv_events = 0
+        self.wcv_pair_steps = 0
+        self.induced_keys: set[int] = set()
+        self._los_began = np.zeros((0, 2), dtype=np.int64)
+        self._safety_calls = 0
+        self.first_alert = math.nan
+        self.flight_s = 0.0
+        self.speed = np.zeros(n)  # m/s, last speed flown
+        self.arrival = np.full(n, np.nan)  # s, when the aircraft left the world
+        self._was_active = np.ones(n, dtype=bool)
+        self._active = np.ones(n, dtype=bool)
 
     def contacts(self, positions, pairs: dict, began: dict):
         """Record this step's pair sets and new episodes.
@@ -83,6 +190,7 @@ class WorldMetrics:
             prev_positions, prev_los_keys, prev_nmac_keys = self._prev_contacts
         self._prev_contacts = (positions.copy(), los_keys.copy(), nmac_keys.copy())
         los_began, nmac_began = began[LOS], began[NMAC]
+        self._los_began = los_began
         self.los_events += len(los_began)
         self.nmac_events += len(nmac_began)
         if prev_positions is not None and (los_keys.size or prev_los_keys.size):
@@ -123,7 +231,54 @@ class WorldMetrics:
         """One step flown: ``travelled`` (N,) m, ``turned`` (N,) heading change, rad;
         ``following_policy`` (N,) bool, the turn was the CDA policy's."""
         self.flown += travelled
+        moved = travelled > 0
+        self.flight_s += self.dt * int(np.count_nonzero(moved))
+        self.speed = np.where(moved, travelled / self.dt, self.speed)
         self.avoid_turn += np.where(following_policy, np.abs(turned), 0.0)
+
+    def safety(self, time, positions, velocities, active, following, lookahead_s):
+        """Well clear, induced losses, first alert and arrivals at a step instant (after
+        :meth:`contacts` and :meth:`conflicts` of the same instant).
+
+        time : s; positions (N, 2) m, velocities (N, 2) m/s, true; active (N,) bool;
+        following (N,) bool, flew the CDA policy in the step just flown; lookahead_s : s,
+        the resolver's look-ahead. All unordered pairs of active aircraft (N(N−1)/2 per
+        step, one numba pass, :func:`_pair_scan`).
+        """
+        first = self._safety_calls == 0
+        self._safety_calls += 1
+        if self.alerts and math.isnan(self.first_alert):
+            self.first_alert = float(time)
+        left = self._was_active & ~active
+        self.arrival[left] = float(time)
+        self._was_active = active.copy()
+        self._active = self._was_active
+
+        if not first and self._los_began.size:
+            # pair index in the kernel's order (i < j, row by row) of (a, b), a < b
+            a, b = self._los_began[:, 0], self._los_began[:, 1]
+            idx = a * (2 * self.n - a - 1) // 2 + (b - a - 1)
+            fresh = ~self._predicted[idx]
+            self.induced_keys.update(int(k) for k in (a * max(self.n, 1) + b)[fresh])
+        prev, now = self._wcv_now, self._wcv_prev  # reuse the older buffer
+        events, count = _pair_scan(
+            np.ascontiguousarray(positions, dtype=float),
+            np.ascontiguousarray(velocities, dtype=float),
+            np.ascontiguousarray(active, dtype=np.bool_),
+            np.ascontiguousarray(following, dtype=np.bool_),
+            self.dmod**2,
+            self.hmd**2,
+            self.tau_mod,
+            self.r_safe**2,
+            float(lookahead_s),
+            prev,
+            now,
+            self._wcv_ever,
+            self._predicted,
+        )
+        self._wcv_prev, self._wcv_now = prev, now
+        self.wcv_events += events
+        self.wcv_pair_steps += count
 
     def tracking(self, track_pos, true_pos, mode_est=None, mode_true=None):
         """Add (P, 2) estimated vs true positions; optional (Q,) modes to compare."""
@@ -139,6 +294,10 @@ class WorldMetrics:
         """The metrics dict; progress (N,) planned distance covered, m; has_plan (N,) bool."""
         extra = np.where(has_plan, self.flown - np.nan_to_num(progress), 0.0)
         planned = float(np.sum(np.where(has_plan, np.nan_to_num(progress), 0.0)))
+        arrived = has_plan & ~self._active & np.isfinite(self.arrival)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            delay = self.arrival[arrived] - np.asarray(progress)[arrived] / self.speed[arrived]
+        hours = self.flight_s / 3600.0
         return {
             "steps": int(steps),
             "time_s": float(time),
@@ -160,4 +319,15 @@ class WorldMetrics:
             else math.nan,
             "mode_accuracy": self.mode_hits / self.mode_samples if self.mode_samples else math.nan,
             "track_steps": self.track_samples,
+            "wcv_events": self.wcv_events,
+            "wcv_pairs": int(np.count_nonzero(self._wcv_ever)),
+            "wcv_duration_s": self.wcv_pair_steps * self.dt,
+            "induced_los_pairs": len(self.induced_keys),
+            "flight_hours": hours,
+            "alerts_per_flight_hour": self.alerts / hours if hours > 0 else math.nan,
+            "first_alert_s": self.first_alert,
+            "arrived": int(np.count_nonzero(arrived)),
+            "not_arrived": int(np.count_nonzero(has_plan & self._active)),
+            "arrival_delay_mean_s": float(delay.mean()) if delay.size else math.nan,
+            "arrival_delay_max_s": float(delay.max()) if delay.size else math.nan,
         }

@@ -328,6 +328,14 @@ class World:
         sp = self.airspace
         m.contacts(self.positions, sp.pairs, sp.began)
         m.conflicts(self.conflict)
+        m.safety(
+            self.time,
+            self.positions,
+            self.velocities,
+            self.active,
+            self.policy.following,
+            self.lookahead,
+        )
         view = self.tracks.view()
         if not tracking or not len(view.owner):
             return
@@ -410,7 +418,10 @@ class World:
         ``los_duration_s``, ``worst_intrusion``, ``nmac_events``, ``nmac_pairs``,
         ``min_separation_m``, ``alerts``, ``conflict_s``, ``extra_path_m``,
         ``extra_path_pct``, ``avoidance_turn_deg``, ``track_rmse_m``, ``mode_accuracy``,
-        ``track_steps``."""
+        ``track_steps``, and the safety metrics ``wcv_events``, ``wcv_pairs``,
+        ``wcv_duration_s``, ``induced_los_pairs``, ``flight_hours``,
+        ``alerts_per_flight_hour``, ``first_alert_s``, ``arrived``, ``not_arrived``,
+        ``arrival_delay_mean_s``, ``arrival_delay_max_s``."""
         return self.metrics_acc.report(self.step_count, self.time, self.progress(), self._has_plan)
 
     def snapshot(self, prediction_points: int = snapshots.PREDICTION_POINTS):
