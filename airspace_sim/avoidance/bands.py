@@ -131,14 +131,24 @@ def preferred_candidates(max_heading_change, resolution, extra, left_penalty=0.0
     ``max_heading_change`` (N,) rad, ``resolution`` rad, ``extra`` None or (N, E) rad. One
     numba pass per row (:func:`_preferred_kernel`): the same array.
     """
+    return preferred_candidates_on_grid(max_heading_change, resolution, extra, left_penalty)[0]
+
+
+def preferred_candidates_on_grid(max_heading_change, resolution, extra, left_penalty=0.0):
+    """:func:`preferred_candidates` and where each came from: ``(candidates (N, C) rad,
+    grid (G,) rad, origin (N, C) int)``, ``origin[n, c] = g`` when the candidate is
+    ``grid[g]``, −1 when it is a limit or an extra (the search kernels look the grid's
+    cos and sin up instead of computing them per row)."""
     mx = np.ascontiguousarray(max_heading_change, dtype=float)
     grid = _grid(mx, resolution)
     if extra is None:
         extra = np.empty((mx.shape[0], 0))
     extra = np.ascontiguousarray(np.asarray(extra, dtype=float).reshape(mx.shape[0], -1))
     if not np.all(np.diff(grid) > 0):  # the kernel needs an increasing grid
-        return sort_by_preference_numpy(candidate_grid(mx, resolution, extra), left_penalty)
-    return _preferred_kernel(grid, mx, extra, float(left_penalty))
+        cand = sort_by_preference_numpy(candidate_grid(mx, resolution, extra), left_penalty)
+        return cand, grid, np.full(cand.shape, -1, dtype=np.int64)
+    cand, origin = _preferred_kernel(grid, mx, extra, float(left_penalty))
+    return cand, grid, origin
 
 
 @njit(cache=True, error_model="numpy")
@@ -173,7 +183,8 @@ def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - comp
     right turns by decreasing index, its left turns by increasing index (``grid`` increasing),
     and the limits and extras after a stable sort of ``mag`` (listed right turns first,
     each in index order) — which are merged. The ``inf`` and then NaN ``mag`` entries follow
-    in that listing order, which is where the lexsort puts them.
+    in that listing order, which is where the lexsort puts them. Returns the sorted rows
+    (n_own, C) and the grid index of each entry (−1: not from the grid).
     """
     n_own, n_extra = extra.shape
     n_grid = grid.size
@@ -182,6 +193,7 @@ def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - comp
     while split < n_grid and not grid[split] > 0.0:
         split += 1
     out = np.empty((n_own, n_cand))
+    origin = np.full((n_own, n_cand), -1, dtype=np.int64)
     row = np.empty(n_cand)
     rv, rm, rl, ri = (
         np.empty(n_cand),
@@ -253,10 +265,13 @@ def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - comp
             xv[k + 1], xm[k + 1], xl[k + 1], xi[k + 1] = v, g, lf, ix
         m = _merge(gv, gm, gl, gi, ng, xv, xm, xl, xi, nx, ov, om, ol, oi, 0)
         out[n, :m] = ov[:m]
+        for i in range(m):
+            if oi[i] < n_grid:
+                origin[n, i] = oi[i]
         for q in range(4):  # then mag = inf, then mag = NaN, right turns first
             out[n, m : m + nt[q]] = tail[q, : nt[q]]
             m += nt[q]
-    return out
+    return out, origin
 
 
 def exact_boundary_candidates(own_velocity, rel_position, rel_velocity, valid, radius, lookahead_s):
@@ -348,7 +363,7 @@ def band_search(
         extra = exact_boundary_candidates(vo, r, v, valid, radius, lookahead_s)
     # sorted by preference: |ψ| (+ left_penalty for left turns), then right turn (ψ ≤ 0)
     # first, then original index
-    cand = preferred_candidates(mx, resolution, extra, left_penalty)
+    cand, grid, origin = preferred_candidates_on_grid(mx, resolution, extra, left_penalty)
     usable = ~np.isnan(cand)
     rows = np.arange(n)
     safe = np.where(usable, cand, 0.0)
@@ -378,6 +393,8 @@ def band_search(
             np.ascontiguousarray(usable),
             np.ascontiguousarray(np.broadcast_to(radius, valid.shape)),
             float(lookahead_s),
+            origin,
+            grid,
         )
         first = first_clear_search(*args, 1.0 - CLEAR_TOLERANCE)
         best = np.full((n, 2), -1, dtype=np.int64)
