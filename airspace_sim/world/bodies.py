@@ -13,15 +13,17 @@ RANGE    centre distance < range       (in surveillance range)
 Pymunk answers the spatial query, numba the exact test. Each aircraft is a KINEMATIC body
 in one ``pymunk.Space`` carrying one sensor circle of radius ``(R + margin) / 2``, ``R`` the
 largest of the three distances: two circles overlap exactly when the aircraft are closer
-than ``R + margin``, and ``space.on_collision`` handlers keep that *candidate* set (Python
-runs only when a candidate pair starts or stops, never per body). The space is not stepped
-every world step: the bodies stay where the candidates were last found, and the candidates
-are found again (positions in with one :mod:`pymunk.batch` call, one zero-velocity step)
-only once the aircraft may have moved so far that a pair outside ``R + margin`` then could
-be inside ``R`` now, i.e. once twice the largest distance flown since (summed per step)
-exceeds the margin. In between, a numba pass over the candidates gives the three exact
-sets every step, with the arithmetic of chipmunk's circle test (``dx² + dy² < d²``), so the
-same pairs as circles of the exact radii stepped every step would give.
+than ``R + margin``, the *candidate* pairs. The space is not stepped every world step: the
+bodies stay where the candidates were last found, and the candidates are found again only
+once the aircraft may have moved so far that a pair outside ``R + margin`` then could be
+inside ``R`` now, i.e. once twice the largest distance flown since (summed per step)
+exceeds the margin: positions in with one :mod:`pymunk.batch` call, one step (velocities
+stay 0), the pairs with an arbiter out with another (collision persistence 1: right after
+a step the arbiters are exactly the overlapping pairs; no Python callback per pair). In
+between, a numba pass over the candidates gives the three exact sets every step, with the
+arithmetic of chipmunk's circle test (``dx² + dy² < d²``), so the same pairs as circles of
+the exact radii stepped every step would give; the pairs that entered a set are a merge
+of its sorted keys with the previous step's.
 
 Positions are integrated here as chipmunk integrates a kinematic body (``p ← p + v·dt``,
 the same bits). Cost per step: O(N + candidates) in numba and numpy, plus pymunk's
@@ -41,31 +43,10 @@ from numba import njit
 LOS, NMAC, RANGE = 1, 2, 3
 SETS = (LOS, NMAC, RANGE)
 _ARBITER_BODIES = pymunk.batch.ArbiterFields.BODY_A_ID | pymunk.batch.ArbiterFields.BODY_B_ID
-#: collision type of the candidate circles
-_CANDIDATE = 1
 #: refresh margin as a fraction of the largest pair distance
 MARGIN_FRACTION = 0.1
 #: the distance flown is compared with the margin less this fraction (float rounding)
 _MARGIN_SLACK = 1e-6
-
-
-class _EventLog:
-    """Collects (i, j, +1 | −1) candidate events from pymunk callbacks."""
-
-    def __init__(self):
-        self.events: list[tuple[int, int, int]] = []
-
-    def _record(self, arbiter, sign):
-        a, b = arbiter.shapes
-        if a.body is None or b.body is None:  # the space is being torn down
-            return
-        self.events.append((a.body._aircraft, b.body._aircraft, sign))
-
-    def begin(self, arbiter, space, data):
-        self._record(arbiter, 1)
-
-    def separate(self, arbiter, space, data):
-        self._record(arbiter, -1)
 
 
 def _insert_sorted(keys: np.ndarray, new: np.ndarray) -> np.ndarray:
@@ -178,17 +159,9 @@ class Airspace:
     # ---------------------------------------------------------------- helpers
     def _build(self, positions: np.ndarray) -> None:
         """Create the space and the bodies (all N, those in :attr:`in_space` added) at
-        ``positions`` (N, 2) m, the handlers and the batch buffers, and find the candidate
-        pairs there (:attr:`_candidates`).
-
-        A zero-velocity step (``p + 0·dt = p`` exactly) makes pymunk create an arbiter for
-        every overlapping pair, so that a later step fires ``separate`` for a pair that
-        stops overlapping and no second ``begin`` for one that still overlaps. The ``begin``
-        handler is installed after that step: its ~30k begins at 1000 aircraft would be as
-        many Python calls; the arbiters are read in one batch call instead.
-        """
+        ``positions`` (N, 2) m and the batch buffers, and find the candidate pairs there
+        (:attr:`_candidates`, one zero-velocity step: ``p + 0·dt = p`` exactly)."""
         n = self.n
-        self._log = log = _EventLog()
         self._buf_get = pymunk.batch.Buffer()
         self._buf_set = pymunk.batch.Buffer()
         self._pbuf = np.zeros(0)
@@ -202,14 +175,13 @@ class Airspace:
             body._aircraft = i
             c = pymunk.Circle(body, radius)
             c.sensor = True
-            c.collision_type = _CANDIDATE
             if self.in_space[i]:
                 space.add(body, c)
             self.bodies.append(body)
             self.shapes.append(c)
-        # An arbiter keeps the handler it was created with: ``separate`` must be in place
-        # before the priming step, ``begin`` only after it (same handler struct).
-        space.on_collision(_CANDIDATE, _CANDIDATE, separate=log.separate)
+        # an arbiter not touched in a step is dropped at once: the arbiters after a step
+        # are the overlapping pairs (sensors' arbiters hold no contacts worth keeping)
+        space.collision_persistence = 1
         if self.spatial_hash and n:
             space.use_spatial_hash(float(2.0 * radius), 4 * n)
         ids = np.array([b.id for b in self.bodies], dtype=np.uintp)
@@ -219,7 +191,6 @@ class Airspace:
         if self._order.size:
             space.step(1.0)  # every body has velocity 0 and keeps it
         self._candidates = self._arbiter_keys()
-        space.on_collision(_CANDIDATE, _CANDIDATE, begin=log.begin)
 
     def _refresh_order(self) -> None:
         """Aircraft index (B,) of each body in the space in pymunk's iteration order."""
@@ -233,8 +204,8 @@ class Airspace:
         return by_id[np.searchsorted(ids, body_ids)].astype(np.int64)
 
     def _arbiter_keys(self) -> np.ndarray:
-        """(P,) sorted keys of the pairs with an arbiter (right after the priming step of a
-        new space: exactly the overlapping pairs)."""
+        """(P,) sorted keys of the pairs with an arbiter (right after a step: exactly the
+        overlapping pairs, collision persistence being 1)."""
         self._buf_get.clear()
         pymunk.batch.get_space_arbiters(self.space, _ARBITER_BODIES, self._buf_get)
         ab = self._aircraft_of(np.frombuffer(self._buf_get.int_buf(), np.uintp)).reshape(-1, 2)
@@ -243,7 +214,7 @@ class Airspace:
 
     def _refresh(self) -> None:
         """Find the candidates again at the current positions: bodies moved there in one
-        batch call, one step (velocities stay 0), the events folded into the candidates."""
+        batch call, one step (velocities stay 0), the arbiters read in another."""
         if self._order.size:
             p = np.ascontiguousarray(self.positions[self._order])
             self._pbuf = p  # keep the memory alive while pymunk reads it
@@ -252,27 +223,9 @@ class Airspace:
                 self.space, pymunk.batch.BodyFields.POSITION, self._buf_set
             )
             self.space.step(1.0)
-        self._drain()
+        self._candidates = self._arbiter_keys()
         self._flown = 0.0
         self.refreshes += 1
-
-    def _drain(self) -> None:
-        """Fold the recorded events into the candidate keys."""
-        events = self._log.events
-        self._log.events = []
-        if not events:
-            return
-        n = max(self.n, 1)
-        ev = np.array(events, dtype=np.int64).reshape(-1, 3)
-        keys = np.minimum(ev[:, 0], ev[:, 1]) * n + np.maximum(ev[:, 0], ev[:, 1])
-        k = self._candidates
-        gone = keys[ev[:, 2] < 0]
-        if gone.size:
-            k = _delete_sorted(k, gone)
-        new = np.unique(keys[ev[:, 2] > 0])
-        if new.size:
-            k = _insert_sorted(k, new)
-        self._candidates = k
 
     def _update_sets(self, reset_began: bool = True) -> None:
         """The three exact sets from the candidates at :attr:`positions`; :attr:`began`
@@ -322,7 +275,9 @@ class Airspace:
             self.space.remove(self.bodies[i], self.shapes[i])
         self.in_space[idx] = False
         self._refresh_order()
-        self._drain()
+        n = max(self.n, 1)
+        k = self._candidates
+        self._candidates = k[self.in_space[k // n] & self.in_space[k % n]]
         self._update_sets(reset_began=False)
 
     def pair_arrays(self, kind: int) -> tuple[np.ndarray, np.ndarray]:
@@ -338,9 +293,8 @@ class Airspace:
         flown since, membership, candidates, pair sets and the last step's began pairs.
 
         The pymunk objects are not pickled: the batch buffers are cffi memory, and pymunk's
-        own ``Space`` pickling restores cached arbiters that no longer fire ``separate`` (a
-        copy misses the end of every pair that overlapped when it was saved) and costs
-        O(arbiters × shapes). :meth:`__setstate__` rebuilds the space instead.
+        own ``Space`` pickling costs O(arbiters × shapes). :meth:`__setstate__` rebuilds
+        the space instead.
         """
         return {
             "n": self.n,
@@ -361,13 +315,9 @@ class Airspace:
         }
 
     def __setstate__(self, state: dict) -> None:
-        """Rebuild the space from :meth:`__getstate__`'s data, with an arbiter for every
-        candidate pair (see :meth:`_build`), and check the candidates it finds and the
-        exact sets they give against the stored ones.
-
-        A copy whose space found other candidates than the original's would fire other
-        events from the next refresh on.
-        """
+        """Rebuild the space from :meth:`__getstate__`'s data (see :meth:`_build`), and
+        check the candidates it finds and the exact sets they give against the stored
+        ones."""
         self.n = int(state["n"])
         self.distances = dict(state["distances"])
         self.margin = float(state["margin"])
