@@ -65,7 +65,7 @@ class BandResult:
         ``ψ ≤ 0``, with ``ψ ≥ 0`` and with ``ψ < 0`` (−1: none).
     best_blocked : (N, 2) int, on a side (``ψ ≤ 0``, ``ψ ≥ 0``) without a clear candidate,
         the index of its candidate of largest ``min_ratio`` (the first among equals); −1
-        where the side has a clear candidate.
+        where the side has a clear candidate (or is not the row's ``committed_side``).
     """
 
     heading_change: np.ndarray
@@ -326,6 +326,7 @@ def band_search(
     left_penalty=0.0,
     turn_rate=None,
     full=True,
+    committed_side=None,
 ):
     """Choose each ownship's heading change against all its intruders at once.
 
@@ -346,6 +347,11 @@ def band_search(
         candidates only, ``turn_rate`` None): only what a choice needs — the first clear
         candidate of each side, and ``min_ratio`` on the rows where a side has none — the
         same choice, ``first_clear`` and (on those rows) ``min_ratio`` as ``full=True``.
+    committed_side : None or (N,), −1 (right), +1 (left), 0 (none): the turn side each
+        ownship's CDA policy keeps. On a row with a side, ``best_blocked`` is searched on
+        that side only (−1 in the other column), so where nothing is clear the choice is
+        the best candidate of that side (what the policy flies there, whatever the other
+        side holds); half the max-min searches of a dense airspace.
 
     Returns
     -------
@@ -369,6 +375,10 @@ def band_search(
     safe = np.where(usable, cand, 0.0)
     ratio0 = cpa_min_ratio(vo, r, v, valid, np.zeros((n, 1)), radius, lookahead_s)[:, 0]
     conflict = ~(ratio0 >= 1.0 - CLEAR_TOLERANCE)
+    wanted = np.ones((n, 2), dtype=bool)  # (n, 2): best_blocked of (ψ ≤ 0, ψ ≥ 0) wanted
+    if committed_side is not None:
+        side = np.broadcast_to(np.asarray(committed_side, dtype=float), (n,))
+        wanted = np.stack([side <= 0, side >= 0], axis=1)
     if full or turn_rate is not None:
         if turn_rate is None:
             ratio = cpa_min_ratio(vo, r, v, valid, safe, radius, lookahead_s)
@@ -380,7 +390,7 @@ def band_search(
         best = np.full((n, 2), -1, dtype=np.int64)
         for col, mask in enumerate((cand <= 0, cand >= 0)):
             score = np.where(mask & usable, ratio, -np.inf)
-            blocked = (first[:, col] < 0) & (mask & usable).any(axis=1)
+            blocked = (first[:, col] < 0) & (mask & usable).any(axis=1) & wanted[:, col]
             best[:, col] = np.where(blocked, np.argmax(score, axis=1), -1)
     else:
         band = ratio = None
@@ -402,6 +412,7 @@ def band_search(
         blocked &= np.stack(
             [(usable & (cand <= 0)).any(axis=1), (usable & (cand >= 0)).any(axis=1)], axis=1
         )
+        blocked &= wanted
         who, col = np.nonzero(blocked)
         if who.size:
             best[who, col] = best_blocked_search(*args, who.astype(np.int64), col.astype(np.int64))
