@@ -262,6 +262,9 @@ class Resolver(ABC):
     #: the output carries ``candidates``, ``first_clear`` and ``best_blocked`` (the CDA
     #: policy can commit a turn side; :class:`~airspace_sim.avoidance.resolvers.ResolverOutput`)
     reports_band: ClassVar[bool] = False
+    #: :meth:`resolve` takes ``committed_side`` (N,) (−1 right, +1 left, 0 none), the side
+    #: the CDA policy keeps, and may then search only that side (with ``reports_band``)
+    uses_committed_side: ClassVar[bool] = False
 
     params: object
 

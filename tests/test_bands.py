@@ -503,3 +503,37 @@ def test_preferred_candidates_equal_the_lexsort_reference(left_penalty):
         sort_by_preference_numpy(candidate_grid(mx, RES), left_penalty),
         equal_nan=True,
     )
+
+
+@pytest.mark.parametrize("full", [False, True])
+def test_committed_side_searches_only_that_side(full):
+    # with a committed side, best_blocked is the side-free search's on that side and −1 on
+    # the other; rows without a side are unchanged; where nothing is clear the choice is
+    # the committed side's best
+    rng = np.random.default_rng(11)
+    n, k = 300, 12
+    heading = rng.uniform(-np.pi, np.pi, n)
+    vo = 230.0 * np.stack([np.cos(heading), np.sin(heading)], axis=1)
+    r = rng.uniform(-20000.0, 20000.0, (n, k, 2))
+    vi = rng.uniform(-300.0, 300.0, (n, k, 2))
+    valid = rng.random((n, k)) < 0.9
+    mx = np.radians(rng.choice([10.0, 45.0, 90.0], n))
+    side = rng.choice([-1.0, 0.0, 1.0], n)
+    args = (vo, r, vi - vo[:, None], valid, mx, 3000.0, 120.0, 0.1)
+    free = band_search(*args, full=full)
+    got = band_search(*args, full=full, committed_side=side)
+    np.testing.assert_array_equal(got.first_clear, free.first_clear)
+    np.testing.assert_array_equal(got.candidates, free.candidates)
+    col = np.where(side < 0, 0, 1)
+    rows = np.arange(n)
+    on = side != 0
+    np.testing.assert_array_equal(got.best_blocked[on, col[on]], free.best_blocked[on, col[on]])
+    assert (got.best_blocked[on, 1 - col[on]] == -1).all()
+    np.testing.assert_array_equal(got.best_blocked[~on], free.best_blocked[~on])
+    none_clear = (free.first_clear[:, 0] < 0) & (free.first_clear[:, 1] < 0)
+    assert (none_clear & on).sum() > 10  # the scene has rows blocked on both sides
+    np.testing.assert_array_equal(
+        got.heading_change[~(none_clear & on)], free.heading_change[~(none_clear & on)]
+    )
+    pick = free.candidates[rows, free.best_blocked[rows, col]]
+    np.testing.assert_array_equal(got.heading_change[none_clear & on], pick[none_clear & on])

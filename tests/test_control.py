@@ -2,6 +2,8 @@
 against the numpy references (same arrays bit for bit), and the reachability test against
 a brute-force oracle over headings."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -222,3 +224,29 @@ def test_reachable_non_finite_and_huge():
         np.testing.assert_array_equal(
             reachable(enc, vo, radius, T), reachable_numpy(enc, vo, radius, T)
         )
+
+
+@pytest.mark.parametrize("preference", ["right", "nearest"])
+def test_committed_side_search_flies_the_same_world(monkeypatch, preference):
+    # the policy passing its committed sides (the resolver then searches the best blocked
+    # heading of that side only) flies exactly the world of the side-free search
+    from airspace_sim.avoidance.resolvers import BandsResolver
+    from airspace_sim.world.benchmark import random_scenario
+
+    sc = random_scenario(120, duration=60.0)
+    sc = dataclasses.replace(
+        sc, resolver=dataclasses.replace(sc.resolver, turn_preference=preference)
+    )
+    runs = []
+    for uses in (True, False):
+        monkeypatch.setattr(BandsResolver, "uses_committed_side", uses)
+        world = World(sc, seed=3)
+        steps = []
+        for _ in range(40):
+            world.step()
+            steps.append(
+                (world.positions.tobytes(), world.advice.tobytes(), world.policy.side.tobytes())
+            )
+        runs.append(steps)
+        assert (world.policy.side != 0).sum() > 10 and world.conflict.sum() > 10
+    assert runs[0] == runs[1]

@@ -227,3 +227,39 @@ def test_boundary_kernel_equals_numpy_degenerate():
     assert np.all(np.abs(np.abs(got[1, 6:8, 4:]) - np.pi) < 1e-12)
     assert not np.any(got[:, :5, :4] == 0.0)  # ψ = 0 has no relative motion: no tangent ray
     assert np.isnan(got[0]).all()  # no own speed: no heading change moves anything
+
+
+def test_boundary_kernel_equals_numpy_equal_speeds():
+    """Intruders as fast as the ownship: one tangent root per side has ``v_rel ≈ 0``
+    (``λ`` near the ray test's threshold), where the kernel's angle-sum cos / sin must
+    give way to libm's; the roots that exist are the reference's."""
+    rng = np.random.default_rng(8)
+    n, k = 60, 20
+    vo = rotate(np.array([230.0, 0.0]), rng.uniform(-np.pi, np.pi, n))
+    r = rng.uniform(-30000.0, 30000.0, (n, k, 2))
+    vi = rotate(np.repeat(vo[:, None, :], k, axis=1), rng.uniform(-np.pi, np.pi, (n, k)))
+    valid = np.ones((n, k), bool)
+    got, _ = _assert_kernel_matches(vo, r, vi, valid, np.full((n, k), 3300.0), 120.0)
+    assert np.isnan(got[..., :4]).sum() > 0 and (~np.isnan(got[..., :4])).sum() > 0
+
+
+def test_tangent_ray_test_is_the_reference_decision_near_its_threshold():
+    # the fast test with cos / sin off by up to 5e-8 (above the angle-sum formula's error)
+    # decides like λ = (v_i − R(ψ) v_o)·u > 1e-12·scale with libm's cos / sin, also for
+    # relative speeds right at the threshold
+    from airspace_sim.avoidance.heading import _on_tangent_ray
+
+    rng = np.random.default_rng(9)
+    for _ in range(3000):
+        psi = rng.uniform(-np.pi, np.pi)
+        vo = rotate(np.array([rng.uniform(50.0, 300.0), 0.0]), rng.uniform(-np.pi, np.pi))
+        u = rotate(np.array([1.0, 0.0]), rng.uniform(-np.pi, np.pi))
+        ro = np.array([np.cos(psi) * vo[0] - np.sin(psi) * vo[1], 0.0])
+        ro[1] = np.sin(psi) * vo[0] + np.cos(psi) * vo[1]
+        scale = float(np.hypot(*vo)) * 2.0
+        lam = rng.choice([0.0, 1e-12, 1e-9, 1e-7, 1e-3, 1.0]) * scale * rng.choice([-1, 1, 2])
+        vi = ro + lam * u
+        ref = float(np.sum((vi - ro) * u)) > 1e-12 * scale
+        e = rng.uniform(-5e-8, 5e-8, 2)
+        got = _on_tangent_ray(psi, np.cos(psi) + e[0], np.sin(psi) + e[1], *vo, *vi, *u, scale)
+        assert got == ref

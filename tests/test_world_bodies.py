@@ -197,8 +197,8 @@ def test_copy_taken_while_pairs_overlap_fires_separate_and_no_second_begin():
     assert separated == began == {LOS, NMAC, RANGE}
 
 
-@pytest.mark.parametrize("spatial_hash", [False, True])
-def test_copies_of_a_busy_airspace_step_identically(spatial_hash):
+@pytest.mark.parametrize("spatial_hash, margin", [(False, None), (True, None), (False, 3000.0)])
+def test_copies_of_a_busy_airspace_step_identically(spatial_hash, margin):
     # 40 aircraft at 200 m/s turning at random in a 30 km square: pairs begin and end all
     # the time. The airspace is copied after 20 steps, then all are stepped 80 more with the
     # same velocities; one aircraft is removed on the way.
@@ -206,7 +206,7 @@ def test_copies_of_a_busy_airspace_step_identically(spatial_hash):
     n = 40
     pos0 = rng.uniform(-15000.0, 15000.0, (n, 2))
     heading = rng.uniform(-np.pi, np.pi, n)
-    sp = Airspace(pos0, 3000.0, 1000.0, 8000.0, spatial_hash=spatial_hash)
+    sp = Airspace(pos0, 3000.0, 1000.0, 8000.0, spatial_hash=spatial_hash, margin=margin)
     pos = pos0.copy()
 
     def velocities():
@@ -262,17 +262,23 @@ def _random_flight(n, side, seed, steps, speed=230.0, turn_sigma=0.1):
     return pos0, velocities()
 
 
-@pytest.mark.parametrize("spatial_hash", [False, True])
-def test_busy_random_traffic_pairs_and_begin_events_equal_brute_force(spatial_hash):
+@pytest.mark.parametrize(
+    "spatial_hash, margin", [(False, None), (True, None), (False, 0.0), (False, 15000.0)]
+)
+def test_busy_random_traffic_pairs_and_begin_events_equal_brute_force(spatial_hash, margin):
     # 300 aircraft, one per 30 km² (3x the benchmark's density), 20 km range circles
     # (~1300 range pairs), 2 s steps at 230 m/s: every step many range pairs begin and
     # end, and several LoS / NMAC pairs. Oracle: brute-force distances; the begun pairs of
     # a step are exactly the brute-force pairs that were not there the step before, the
-    # ended ones those that were there and are not now (pair sets equal every step).
+    # ended ones those that were there and are not now (pair sets equal every step). The
+    # candidates are found again every step (margin 0), every third step (default) or
+    # every 17 steps (15 km).
     n, side = 300, 95000.0
     radii = {LOS: 3000.0, NMAC: 1000.0, RANGE: 20000.0}
     pos, velocities = _random_flight(n, side, seed=11, steps=60)
-    sp = Airspace(pos, radii[LOS], radii[NMAC], radii[RANGE], spatial_hash=spatial_hash)
+    sp = Airspace(
+        pos, radii[LOS], radii[NMAC], radii[RANGE], spatial_hash=spatial_hash, margin=margin
+    )
     prev = {t: brute_pairs(pos, r) for t, r in radii.items()}
     for t in SETS:
         assert airspace_pairs(sp, t) == prev[t]
@@ -295,10 +301,10 @@ def test_busy_random_traffic_pairs_and_begin_events_equal_brute_force(spatial_ha
                 ended_total[t] += len(prev[t] - now)
             prev[t] = now
     assert min(began_total[t] for t in SETS) > 0 and min(ended_total[t] for t in SETS) > 0
-    # the three copies of every aircraft (one body per set's space) are at the same place
-    for t in SETS:
-        at = np.array([tuple(b.position) for b in sp.bodies[t]])
-        assert at[sp.in_space].tobytes() == pos[sp.in_space].tobytes(), t
+    # the airspace's positions are the ones handed out; the candidates were found again
+    assert sp.positions[sp.in_space].tobytes() == pos[sp.in_space].tobytes()
+    expected_refreshes = {None: 20, 0.0: 60, 15000.0: 3}[margin]
+    assert sp.refreshes == expected_refreshes
     assert began_total[RANGE] > 500 and ended_total[RANGE] > 500
 
 

@@ -65,7 +65,7 @@ class BandResult:
         ``ψ ≤ 0``, with ``ψ ≥ 0`` and with ``ψ < 0`` (−1: none).
     best_blocked : (N, 2) int, on a side (``ψ ≤ 0``, ``ψ ≥ 0``) without a clear candidate,
         the index of its candidate of largest ``min_ratio`` (the first among equals); −1
-        where the side has a clear candidate.
+        where the side has a clear candidate (or is not the row's ``committed_side``).
     """
 
     heading_change: np.ndarray
@@ -131,14 +131,24 @@ def preferred_candidates(max_heading_change, resolution, extra, left_penalty=0.0
     ``max_heading_change`` (N,) rad, ``resolution`` rad, ``extra`` None or (N, E) rad. One
     numba pass per row (:func:`_preferred_kernel`): the same array.
     """
+    return preferred_candidates_on_grid(max_heading_change, resolution, extra, left_penalty)[0]
+
+
+def preferred_candidates_on_grid(max_heading_change, resolution, extra, left_penalty=0.0):
+    """:func:`preferred_candidates` and where each came from: ``(candidates (N, C) rad,
+    grid (G,) rad, origin (N, C) int)``, ``origin[n, c] = g`` when the candidate is
+    ``grid[g]``, −1 when it is a limit or an extra (the search kernels look the grid's
+    cos and sin up instead of computing them per row)."""
     mx = np.ascontiguousarray(max_heading_change, dtype=float)
     grid = _grid(mx, resolution)
     if extra is None:
         extra = np.empty((mx.shape[0], 0))
     extra = np.ascontiguousarray(np.asarray(extra, dtype=float).reshape(mx.shape[0], -1))
     if not np.all(np.diff(grid) > 0):  # the kernel needs an increasing grid
-        return sort_by_preference_numpy(candidate_grid(mx, resolution, extra), left_penalty)
-    return _preferred_kernel(grid, mx, extra, float(left_penalty))
+        cand = sort_by_preference_numpy(candidate_grid(mx, resolution, extra), left_penalty)
+        return cand, grid, np.full(cand.shape, -1, dtype=np.int64)
+    cand, origin = _preferred_kernel(grid, mx, extra, float(left_penalty))
+    return cand, grid, origin
 
 
 @njit(cache=True, error_model="numpy")
@@ -173,7 +183,8 @@ def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - comp
     right turns by decreasing index, its left turns by increasing index (``grid`` increasing),
     and the limits and extras after a stable sort of ``mag`` (listed right turns first,
     each in index order) — which are merged. The ``inf`` and then NaN ``mag`` entries follow
-    in that listing order, which is where the lexsort puts them.
+    in that listing order, which is where the lexsort puts them. Returns the sorted rows
+    (n_own, C) and the grid index of each entry (−1: not from the grid).
     """
     n_own, n_extra = extra.shape
     n_grid = grid.size
@@ -182,6 +193,7 @@ def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - comp
     while split < n_grid and not grid[split] > 0.0:
         split += 1
     out = np.empty((n_own, n_cand))
+    origin = np.full((n_own, n_cand), -1, dtype=np.int64)
     row = np.empty(n_cand)
     rv, rm, rl, ri = (
         np.empty(n_cand),
@@ -253,10 +265,13 @@ def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - comp
             xv[k + 1], xm[k + 1], xl[k + 1], xi[k + 1] = v, g, lf, ix
         m = _merge(gv, gm, gl, gi, ng, xv, xm, xl, xi, nx, ov, om, ol, oi, 0)
         out[n, :m] = ov[:m]
+        for i in range(m):
+            if oi[i] < n_grid:
+                origin[n, i] = oi[i]
         for q in range(4):  # then mag = inf, then mag = NaN, right turns first
             out[n, m : m + nt[q]] = tail[q, : nt[q]]
             m += nt[q]
-    return out
+    return out, origin
 
 
 def exact_boundary_candidates(own_velocity, rel_position, rel_velocity, valid, radius, lookahead_s):
@@ -311,6 +326,7 @@ def band_search(
     left_penalty=0.0,
     turn_rate=None,
     full=True,
+    committed_side=None,
 ):
     """Choose each ownship's heading change against all its intruders at once.
 
@@ -331,6 +347,11 @@ def band_search(
         candidates only, ``turn_rate`` None): only what a choice needs — the first clear
         candidate of each side, and ``min_ratio`` on the rows where a side has none — the
         same choice, ``first_clear`` and (on those rows) ``min_ratio`` as ``full=True``.
+    committed_side : None or (N,), −1 (right), +1 (left), 0 (none): the turn side each
+        ownship's CDA policy keeps. On a row with a side, ``best_blocked`` is searched on
+        that side only (−1 in the other column), so where nothing is clear the choice is
+        the best candidate of that side (what the policy flies there, whatever the other
+        side holds); half the max-min searches of a dense airspace.
 
     Returns
     -------
@@ -348,12 +369,16 @@ def band_search(
         extra = exact_boundary_candidates(vo, r, v, valid, radius, lookahead_s)
     # sorted by preference: |ψ| (+ left_penalty for left turns), then right turn (ψ ≤ 0)
     # first, then original index
-    cand = preferred_candidates(mx, resolution, extra, left_penalty)
+    cand, grid, origin = preferred_candidates_on_grid(mx, resolution, extra, left_penalty)
     usable = ~np.isnan(cand)
     rows = np.arange(n)
     safe = np.where(usable, cand, 0.0)
     ratio0 = cpa_min_ratio(vo, r, v, valid, np.zeros((n, 1)), radius, lookahead_s)[:, 0]
     conflict = ~(ratio0 >= 1.0 - CLEAR_TOLERANCE)
+    wanted = np.ones((n, 2), dtype=bool)  # (n, 2): best_blocked of (ψ ≤ 0, ψ ≥ 0) wanted
+    if committed_side is not None:
+        side = np.broadcast_to(np.asarray(committed_side, dtype=float), (n,))
+        wanted = np.stack([side <= 0, side >= 0], axis=1)
     if full or turn_rate is not None:
         if turn_rate is None:
             ratio = cpa_min_ratio(vo, r, v, valid, safe, radius, lookahead_s)
@@ -365,7 +390,7 @@ def band_search(
         best = np.full((n, 2), -1, dtype=np.int64)
         for col, mask in enumerate((cand <= 0, cand >= 0)):
             score = np.where(mask & usable, ratio, -np.inf)
-            blocked = (first[:, col] < 0) & (mask & usable).any(axis=1)
+            blocked = (first[:, col] < 0) & (mask & usable).any(axis=1) & wanted[:, col]
             best[:, col] = np.where(blocked, np.argmax(score, axis=1), -1)
     else:
         band = ratio = None
@@ -378,6 +403,8 @@ def band_search(
             np.ascontiguousarray(usable),
             np.ascontiguousarray(np.broadcast_to(radius, valid.shape)),
             float(lookahead_s),
+            origin,
+            grid,
         )
         first = first_clear_search(*args, 1.0 - CLEAR_TOLERANCE)
         best = np.full((n, 2), -1, dtype=np.int64)
@@ -385,6 +412,7 @@ def band_search(
         blocked &= np.stack(
             [(usable & (cand <= 0)).any(axis=1), (usable & (cand >= 0)).any(axis=1)], axis=1
         )
+        blocked &= wanted
         who, col = np.nonzero(blocked)
         if who.size:
             best[who, col] = best_blocked_search(*args, who.astype(np.int64), col.astype(np.int64))

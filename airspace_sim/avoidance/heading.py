@@ -195,6 +195,34 @@ def _cos_sin_roots(a, b, c):  # pragma: no cover - compiled
     return _wrap(phi - half), _wrap(phi + half)
 
 
+#: guard band of the fast tangent-ray test, relative to ``|v_o| + |v_i|`` (see
+#: :func:`_on_tangent_ray`); far above the fast cos / sin's error bound (≈ 2e-8)
+_RAY_GUARD = 1e-6
+
+
+@njit(cache=True, error_model="numpy")
+def _on_tangent_ray(psi, cos_psi, sin_psi, vox, voy, vix, viy, ux, uy, scale):  # pragma: no cover
+    """The tangent-ray test of :func:`tangent_heading_changes` (``λ > 1e-12·scale``) for the
+    root ``psi`` of :func:`_cos_sin_roots`, decided from ``cos_psi``, ``sin_psi``: its
+    cos and sin from the angle-sum formula (no libm call), within ~2e-8 of ``cos(psi)``,
+    ``sin(psi)``. Only a λ within :data:`_RAY_GUARD`·scale of the threshold (relative
+    speed ≲ 1e-6·scale at the root) is recomputed with ``cos(psi)``, ``sin(psi)`` as the
+    numpy reference does, so the decision is always the reference's."""
+    threshold = 1e-12 * scale
+    guard = _RAY_GUARD * scale
+    wx = vix - (cos_psi * vox - sin_psi * voy)
+    wy = viy - (sin_psi * vox + cos_psi * voy)
+    lam = _sum2(wx * ux, wy * uy)
+    if lam > threshold + guard:
+        return True
+    if lam < threshold - guard:
+        return False
+    cp, sp = np.cos(psi), np.sin(psi)
+    wx = vix - (cp * vox - sp * voy)
+    wy = viy - (sp * vox + cp * voy)
+    return _sum2(wx * ux, wy * uy) > threshold
+
+
 @njit(cache=True, error_model="numpy")
 def boundary_heading_changes(vo, r, vi, valid, radius, lookahead_s):  # pragma: no cover
     """Per (ownship, intruder) pair the six boundary roots, ``(N, K, 6)`` rad, NaN if none.
@@ -205,7 +233,8 @@ def boundary_heading_changes(vo, r, vi, valid, radius, lookahead_s):  # pragma: 
     :func:`tangent_heading_changes` with ``side = −1``, the two with ``side = +1``, the two of
     :func:`range_at_time_heading_changes` at ``t = T``. One fused loop with the numpy
     functions' operations in their order (they are the reference), so the same numbers up to
-    the last bit of the transcendental functions.
+    the last bit of the transcendental functions. The tangent roots' ray test takes their
+    cos and sin from the angle-sum formula (:func:`_on_tangent_ray`, the same decisions).
     """
     n_own, n_int = valid.shape
     out = np.full((n_own, n_int, 6), np.nan)
@@ -238,13 +267,22 @@ def boundary_heading_changes(vo, r, vi, valid, radius, lookahead_s):  # pragma: 
                 b = _sum2(nx * -voy, ny * vox)
                 c = _sum2(nx * vix, ny * viy)
                 roots = _cos_sin_roots(a, b, c)
+                if np.isnan(roots[0]):
+                    continue
+                # roots φ ∓ h: cos φ = a/amp, sin φ = b/amp, cos h = c/amp, sin h ≥ 0
+                amp = np.hypot(a, b)
+                cphi, sphi = a / amp, b / amp
+                ch = min(max(c / amp, -1.0), 1.0)
+                sh = np.sqrt(max(1.0 - ch * ch, 0.0))
                 for j in range(2):
-                    psi = roots[j]
-                    cp, sp = np.cos(psi), np.sin(psi)
-                    wx = vix - (cp * vox - sp * voy)
-                    wy = viy - (sp * vox + cp * voy)
-                    if _sum2(wx * ux, wy * uy) > 1e-12 * scale:  # λ > 0: the tangent ray
-                        out[n, k, 2 * s + j] = psi
+                    sg = -1.0 if j == 0 else 1.0
+                    cos_psi = cphi * ch - sg * sphi * sh
+                    sin_psi = sphi * ch + sg * cphi * sh
+                    # λ > 0: the tangent ray
+                    if _on_tangent_ray(
+                        roots[j], cos_psi, sin_psi, vox, voy, vix, viy, ux, uy, scale
+                    ):
+                        out[n, k, 2 * s + j] = roots[j]
             # range_at_time_heading_changes at t = T
             t = lookahead_s
             px, py = bx + t * vix, by + t * viy

@@ -224,6 +224,7 @@ class BandsResolver(parts.Resolver):
     uses_turn_rate = True
     prefilter = True
     reports_band = True
+    uses_committed_side = True
 
     @dataclass(frozen=True)
     class Params:
@@ -244,7 +245,7 @@ class BandsResolver(parts.Resolver):
             "only what the choice needs, the same choice, much faster",
         )
 
-    def _search(self, vo, r, v, valid, mx, r_safe, turn_rate=None):
+    def _search(self, vo, r, v, valid, mx, r_safe, turn_rate=None, committed_side=None):
         p = self.params
         return band_search(
             vo,
@@ -260,6 +261,7 @@ class BandsResolver(parts.Resolver):
             p.left_penalty,
             turn_rate if p.model_turn else None,
             full=p.full_band,
+            committed_side=committed_side,
         )
 
     def resolve(
@@ -272,11 +274,12 @@ class BandsResolver(parts.Resolver):
         *,
         mode_predictions=None,
         turn_rate=None,
+        committed_side=None,
     ):
         vo, r, v, valid, mx = _arrays(
             own_velocity, rel_position, rel_velocity, valid, max_heading_change
         )
-        res = self._search(vo, r, v, valid, mx, self.params.r_safe, turn_rate)
+        res = self._search(vo, r, v, valid, mx, self.params.r_safe, turn_rate, committed_side)
         return ResolverOutput(
             res.heading_change,
             res.conflict,
@@ -322,6 +325,7 @@ class ProbabilisticBandsResolver(BandsResolver):
         *,
         mode_predictions=None,
         turn_rate=None,
+        committed_side=None,
     ):
         if mode_predictions is None:
             return super().resolve(
@@ -331,6 +335,7 @@ class ProbabilisticBandsResolver(BandsResolver):
                 valid,
                 max_heading_change,
                 turn_rate=turn_rate,
+                committed_side=committed_side,
             )
         vo, r, v, valid, mx = _arrays(
             own_velocity, rel_position, rel_velocity, valid, max_heading_change
@@ -346,7 +351,7 @@ class ProbabilisticBandsResolver(BandsResolver):
         if need.any():
             prob[need] = conflict_probability(xs[need], ps[need], mu[need], r_safe)
         threat = valid & (prob >= threshold)
-        res = self._search(vo, r, v, threat, mx, r_safe, turn_rate)
+        res = self._search(vo, r, v, threat, mx, r_safe, turn_rate, committed_side)
         return ResolverOutput(
             res.heading_change,
             threat.any(axis=-1),

@@ -4,10 +4,13 @@ For each number of aircraft, :func:`airspace_sim.world.benchmark.bench_world` ti
 steps of the constant-density benchmark traffic (with trackers, and/or with perfect
 surveillance), and — with trackers — the bare IMM step over the same number of tracks
 (same preset, in this process, right after): the ratio says how much of a world step is
-not tracking. Then how the cost per step grows with N (ratio of times per step and the
-exponent ``log(ratio) / log(N₂/N₁)``: 1 is linear, 2 quadratic)::
+not tracking. Also steps per second, the peak resident memory and the memory per track.
+Then how the cost per step grows (ratio of times per step and the exponent
+``log(ratio) / log(N₂/N₁)``: 1 is linear, 2 quadratic; and the same in tracks), between
+consecutive sizes and from 1000 aircraft to the largest::
 
     airspace-sim bench-world
+    airspace-sim bench-world --sizes 100 1000 3000 10000
     airspace-sim bench-world --sizes 100 300 1000 --steps 30 --trackers on --json out/bench.json
 
 Absolute numbers depend on the machine and its load; compare ratios from one run.
@@ -52,33 +55,50 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", metavar="PATH", help="also write the results as JSON")
 
 
+#: the growth from this size to the largest is reported too (issue 12: 1000 → 10,000)
+GROWTH_FROM = 1000
+
+
+def _exponent(ratio: float, size_ratio: float) -> float:
+    ok = ratio > 0 and size_ratio > 1
+    return math.log(ratio) / math.log(size_ratio) if ok else float("nan")
+
+
 def growth(rows: list[dict]) -> list[dict]:
-    """Cost growth between consecutive sizes, per tracker setting."""
+    """Cost growth between consecutive sizes, and from :data:`GROWTH_FROM` aircraft to the
+    largest size when those are not consecutive, per tracker setting: the time ratio, its
+    exponent in the number of aircraft and (``track_exponent``) in the number of tracks."""
     out = []
     for trackers in dict.fromkeys(r["trackers"] for r in rows):
         rs = sorted((r for r in rows if r["trackers"] == trackers), key=lambda r: r["aircraft"])
-        for a, b in zip(rs, rs[1:], strict=False):
+        pairs = list(zip(rs, rs[1:], strict=False))
+        start = [r for r in rs[:-2] if r["aircraft"] == GROWTH_FROM]
+        pairs += [(start[0], rs[-1])] if start else []
+        for a, b in pairs:
             ratio = b["ms_per_step"] / a["ms_per_step"]
-            n_ratio = b["aircraft"] / a["aircraft"]
-            exponent = (
-                math.log(ratio) / math.log(n_ratio) if ratio > 0 and n_ratio > 1 else float("nan")
-            )
+            tracks = (b.get("tracks") or 0.0) / (a.get("tracks") or math.inf)
             out.append(
                 {
                     "trackers": trackers,
                     "from": a["aircraft"],
                     "to": b["aircraft"],
                     "time_ratio": ratio,
-                    "exponent": exponent,
+                    "exponent": _exponent(ratio, b["aircraft"] / a["aircraft"]),
+                    "track_exponent": _exponent(ratio, tracks),
                 }
             )
     return out
 
 
+def _opt(value, fmt: str, width: int) -> str:
+    return f"{'-':>{width}}" if value is None else f"{value:>{width}{fmt}}"
+
+
 def format_report(rows: list[dict], grow: list[dict]) -> str:
     lines = [
         f"{'aircraft':>8}  {'trackers':>8}  {'tracks':>8}  {'world ms/step':>13}  "
-        f"{'IMM ms/step':>11}  {'world/IMM':>9}  {'CPU: world':>10}  {'IMM':>8}  {'ratio':>6}"
+        f"{'IMM ms/step':>11}  {'world/IMM':>9}  {'CPU: world':>10}  {'IMM':>8}  {'ratio':>6}  "
+        f"{'steps/s':>7}  {'peak MB':>8}  {'KB/track':>8}"
     ]
     for r in rows:
         imm = r.get("imm_ms_per_step")
@@ -93,11 +113,18 @@ def format_report(rows: list[dict], grow: list[dict]) -> str:
                 f"{imm:>11.2f}  {r['ratio']:>9.2f}  {r['cpu_ms_per_step']:>10.2f}  "
                 f"{r['imm_cpu_ms_per_step']:>8.2f}  {r['cpu_ratio']:>6.2f}"
             )
-        lines.append(head + tail)
+        kb = r.get("bytes_per_track")
+        mem = (
+            f"  {r['steps_per_second']:>7.2f}  {_opt(r.get('peak_rss_mb'), '.0f', 8)}  "
+            f"{_opt(None if kb is None else kb / 1024, '.2f', 8)}"
+        )
+        lines.append(head + tail + mem)
     lines.append(
         "(medians over the timed steps, wall clock, then process CPU time, which other "
         "processes on the machine disturb less; IMM: the bare step of the world's tracker "
-        "over the same number of tracks, same preset, timed right after in this process)"
+        "over the same number of tracks, same preset, timed right after in this process; "
+        "steps/s: all timed steps; peak MB: the process's peak resident memory while the "
+        "world was built and stepped; KB/track: that peak less the memory before, per track)"
     )
     if grow:
         lines.append("")
@@ -106,6 +133,11 @@ def format_report(rows: list[dict], grow: list[dict]) -> str:
                 f"trackers {'on' if g['trackers'] else 'off'}: {g['from']} → {g['to']} aircraft "
                 f"(×{g['to'] / g['from']:.3g}): time per step ×{g['time_ratio']:.2f}, "
                 f"growth exponent {g['exponent']:.2f} (1 = linear, 2 = quadratic)"
+                + (
+                    ""
+                    if math.isnan(g.get("track_exponent", math.nan))
+                    else f", {g['track_exponent']:.2f} in tracks"
+                )
             )
     return "\n".join(lines)
 
@@ -133,6 +165,8 @@ def run(args) -> int:
                     "imm_kernel": None if imm is None else imm["kernel"],
                     "ratio": r.get("ratio"),
                     "cpu_ratio": r.get("cpu_ratio"),
+                    "peak_rss_mb": r.get("peak_rss_mb"),
+                    "bytes_per_track": r.get("bytes_per_track"),
                 }
             )
     grow = growth(rows)

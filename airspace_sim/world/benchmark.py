@@ -137,6 +137,30 @@ def bare_imm(
     }
 
 
+def _rss_bytes(field: str) -> int | None:
+    """``VmRSS`` (now) or ``VmHWM`` (peak) of this process from ``/proc/self/status``, bytes
+    (None where there is no such file)."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith(field + ":"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        return None
+    return None
+
+
+def _reset_peak_rss() -> bool:
+    """Reset this process's peak RSS (Linux ≥ 4.0: ``5`` into ``/proc/self/clear_refs``),
+    so that the next ``VmHWM`` is the peak since now. False where that is not possible."""
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+        return True
+    except OSError:
+        return False
+
+
 def bench_world(
     n_aircraft: int,
     steps: int = 50,
@@ -151,14 +175,22 @@ def bench_world(
     ``seconds`` (after ``warmup`` untimed steps, which also compile numba kernels),
     ``ms_per_step`` (median wall-clock time over the timed steps), ``cpu_ms_per_step``
     (median process CPU time), ``mean_tracks`` (average number of (ownship, intruder)
-    tracks), ``setup_s``. With trackers and ``compare_imm``, also ``imm`` (:func:`bare_imm`
+    tracks), ``setup_s``; on Linux also ``peak_rss_mb`` (the process's peak resident memory
+    while the world was built and stepped, MB) and ``bytes_per_track`` (that peak less the
+    resident memory before, per mean track: everything the world holds, shared by its
+    tracks). With trackers and ``compare_imm``, also ``imm`` (:func:`bare_imm`
     over ``round(mean_tracks)`` tracks of the world's tracker preset, timed right after, in
     this process), ``ratio`` (world ms per step over the bare IMM's, wall clock) and
     ``cpu_ratio`` (the same in CPU time).
     """
-    t0 = time.perf_counter()
+    import gc
+
     from airspace_sim.world import World
 
+    gc.collect()
+    peak_known = _reset_peak_rss()
+    rss0 = _rss_bytes("VmRSS")
+    t0 = time.perf_counter()
     sc = random_scenario(n_aircraft, trackers=trackers, seed=seed)
     world = World(sc, seed=seed)
     setup = time.perf_counter() - t0
@@ -185,9 +217,15 @@ def bench_world(
         "mean_tracks": tracks / max(steps, 1),
         "setup_s": setup,
     }
+    peak = _rss_bytes("VmHWM") if peak_known else None
+    if peak is not None and rss0 is not None:
+        out["peak_rss_mb"] = peak / 2**20
+        out["bytes_per_track"] = (peak - rss0) / max(out["mean_tracks"], 1.0)
+    preset = world.tracker_preset
+    del world  # the bare IMM below runs without the world's memory
     if trackers and compare_imm:
         n_tracks = max(1, round(out["mean_tracks"]))
-        imm = bare_imm(world.tracker_preset, sc.sensor.sigma, n_tracks, steps, seed)
+        imm = bare_imm(preset, sc.sensor.sigma, n_tracks, steps, seed)
         out["imm"] = imm
         out["ratio"] = out["ms_per_step"] / imm["ms_per_step"]
         out["cpu_ratio"] = out["cpu_ms_per_step"] / imm["cpu_ms_per_step"]

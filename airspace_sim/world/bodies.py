@@ -1,61 +1,54 @@
-"""The pymunk side of a world: three ``pymunk.Space``\\ s of kinematic aircraft bodies with
-sensor circles.
+"""The pymunk side of a world: aircraft bodies with sensor circles, and the pairs they form.
 
-Each aircraft is a KINEMATIC body (its velocity is set every step; pymunk integrates
-``p ← p + v·dt`` exactly) in each of three spaces, one per set, carrying one sensor circle:
+Three pair sets are kept, as sorted arrays of keys ``i·N + j`` (``i < j``):
 
-======== ================= ==================================================
-set      circle radius     two circles overlap  ⇔
-======== ================= ==================================================
-LOS      r_safe / 2        centre distance < r_safe      (loss of separation)
-NMAC     nmac / 2          centre distance < nmac        (near mid-air collision)
-RANGE    range / 2         centre distance < range       (in surveillance range)
-======== ================= ==================================================
+======== ==================================================
+set      pair in the set  ⇔
+======== ==================================================
+LOS      centre distance < r_safe      (loss of separation)
+NMAC     centre distance < nmac        (near mid-air collision)
+RANGE    centre distance < range       (in surveillance range)
+======== ==================================================
 
-One space per set, rather than three circles per body in one space, so that the sets never
-meet in the broad phase: in one shared index every small LoS / NMAC circle lies inside the
-bounding boxes of the ~20 range circles around it, and every such pair would be found and
-rejected by shape filter at every step. The three copies of a body get the same velocity
-and start at the same position, so pymunk's integration gives them bit-identical positions.
+Pymunk answers the spatial query, numba the exact test. Each aircraft is a KINEMATIC body
+in one ``pymunk.Space`` carrying one sensor circle of radius ``(R + margin) / 2``, ``R`` the
+largest of the three distances: two circles overlap exactly when the aircraft are closer
+than ``R + margin``, the *candidate* pairs. The space is not stepped every world step: the
+bodies stay where the candidates were last found, and the candidates are found again only
+once the aircraft may have moved so far that a pair outside ``R + margin`` then could be
+inside ``R`` now, i.e. once twice the largest distance flown since (summed per step)
+exceeds the margin: positions in with one :mod:`pymunk.batch` call, one step (velocities
+stay 0), the pairs with an arbiter out with another (collision persistence 1: right after
+a step the arbiters are exactly the overlapping pairs; no Python callback per pair). In
+between, a numba pass over the candidates gives the three exact sets every step, with the
+arithmetic of chipmunk's circle test (``dx² + dy² < d²``), so the same pairs as circles of
+the exact radii stepped every step would give; the pairs that entered a set are a merge
+of its sorted keys with the previous step's.
 
-``space.on_collision(t, t, begin=..., separate=...)`` handlers record pair events; the
-current pairs of each set are kept as a sorted array of keys ``i·N + j`` (``i < j``).
-Python runs only when a pair starts or stops overlapping, so the cost grows with the number
-of pairs changing, never with N². Positions and velocities move in and out of pymunk in one
-call per space with :mod:`pymunk.batch`; the pairs overlapping when a space is built are read
-in one :func:`pymunk.batch.get_space_arbiters` call.
+Positions are integrated here as chipmunk integrates a kinematic body (``p ← p + v·dt``,
+the same bits). Cost per step: O(N + candidates) in numba and numpy, plus pymunk's
+broad phase and arbiters once every ``margin / (2·v_max·dt)`` steps (every 8 steps at the
+benchmark's 40 km range and 230 m/s: margin = 10% of ``R``).
 
 Everything lives on the instance: several worlds in one process never share state.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pymunk
 import pymunk.batch
+from numba import njit
 
 LOS, NMAC, RANGE = 1, 2, 3
 SETS = (LOS, NMAC, RANGE)
 _ARBITER_BODIES = pymunk.batch.ArbiterFields.BODY_A_ID | pymunk.batch.ArbiterFields.BODY_B_ID
-
-
-class _EventLog:
-    """Collects (set, i, j, +1 | −1) contact events from pymunk callbacks."""
-
-    def __init__(self):
-        self.events: list[tuple[int, int, int, int]] = []
-
-    def _record(self, arbiter, sign):
-        a, b = arbiter.shapes
-        if a.body is None or b.body is None:  # the space is being torn down
-            return
-        self.events.append((a.collision_type, a.body._aircraft, b.body._aircraft, sign))
-
-    def begin(self, arbiter, space, data):
-        self._record(arbiter, 1)
-
-    def separate(self, arbiter, space, data):
-        self._record(arbiter, -1)
+#: refresh margin as a fraction of the largest pair distance
+MARGIN_FRACTION = 0.1
+#: the distance flown is compared with the margin less this fraction (float rounding)
+_MARGIN_SLACK = 1e-6
 
 
 def _insert_sorted(keys: np.ndarray, new: np.ndarray) -> np.ndarray:
@@ -75,25 +68,69 @@ def _delete_sorted(keys: np.ndarray, gone: np.ndarray) -> np.ndarray:
     return np.delete(keys, at[keys[at] == gone[inside]])
 
 
+@njit(cache=True)
+def _exact_pairs(keys, n, positions, d2_los, d2_nmac, d2_range):  # pragma: no cover
+    """The candidate ``keys`` (P,) sorted, ``i·n + j``, whose centres (``positions`` (N, 2) m)
+    are closer than each set's distance (squared, m²): ``(los, nmac, range)`` sorted keys.
+    ``dx² + dy² < d²`` as chipmunk's circle test computes it."""
+    los = np.empty(keys.size, dtype=np.int64)
+    nmac = np.empty(keys.size, dtype=np.int64)
+    rng = np.empty(keys.size, dtype=np.int64)
+    a = b = c = 0
+    for p in range(keys.size):
+        i = keys[p] // n
+        j = keys[p] % n
+        dx = positions[j, 0] - positions[i, 0]
+        dy = positions[j, 1] - positions[i, 1]
+        d2 = dx * dx + dy * dy
+        if d2 < d2_los:
+            los[a] = keys[p]
+            a += 1
+        if d2 < d2_nmac:
+            nmac[b] = keys[p]
+            b += 1
+        if d2 < d2_range:
+            rng[c] = keys[p]
+            c += 1
+    return los[:a], nmac[:b], rng[:c]
+
+
+@njit(cache=True)
+def _new_keys(now, before):  # pragma: no cover - compiled
+    """The sorted keys of ``now`` (sorted, unique) that are not in ``before`` (sorted,
+    unique): one merge."""
+    out = np.empty(now.size, dtype=np.int64)
+    k = 0
+    j = 0
+    for i in range(now.size):
+        while j < before.size and before[j] < now[i]:
+            j += 1
+        if j >= before.size or before[j] != now[i]:
+            out[k] = now[i]
+            k += 1
+    return out[:k]
+
+
 class Airspace:
-    """Three pymunk spaces (one per set) holding N aircraft as kinematic bodies with sensor
-    circles.
+    """N aircraft as kinematic pymunk bodies with sensor circles, and their pair sets.
 
     Parameters
     ----------
     positions : (N, 2) initial positions, m.
-    r_safe, nmac, sensor_range : the three radii of the table above, m.
-    in_space : (N,) bool, optional: the aircraft that start in the spaces (default all; the
+    r_safe, nmac, sensor_range : the three distances of the table above, m.
+    spatial_hash : index the space with pymunk's spatial hash (cell size ``R + margin``,
+        4·N cells) instead of the default bounding-box tree; the same pairs either way.
+    margin : m, the candidate circles' extra diameter (default 10% of ``R``); a larger
+        margin means more candidates and rarer refreshes, never other pairs.
+    in_space : (N,) bool, optional: the aircraft that start in the space (default all; the
         others can come in later with :meth:`add`).
-    spatial_hash : index the RANGE space with pymunk's spatial hash (cell size
-        ``sensor_range``, 4·N cells) instead of the default bounding-box tree. The LoS and
-        NMAC spaces always use the tree. Either gives the same pairs and events; the cost
-        of the RANGE space is in its arbiters (one per pair in range), not the broad phase.
 
     Attributes
     ----------
-    pairs : dict set → (P,) int64 sorted keys ``i·N + j`` (``i < j``) of overlapping pairs.
-    began : dict set → (E, 2) int64 pairs (i < j) that began overlapping in the last step.
+    positions : (N, 2) m, current positions (removed aircraft keep their last one).
+    pairs : dict set → (P,) int64 sorted keys ``i·N + j`` (``i < j``) of the pairs in it.
+    began : dict set → (E, 2) int64 pairs (i < j) that entered the set in the last step.
+    refreshes : int, how many times the candidates were found again (after the first).
 
     An ``Airspace`` pickles and deep-copies (see :meth:`__getstate__`); the copy steps
     bit-identically to the original, pair events included.
@@ -106,235 +143,228 @@ class Airspace:
         nmac: float,
         sensor_range: float,
         spatial_hash: bool | None = None,
+        margin: float | None = None,
         in_space=None,
     ):
         positions = np.asarray(positions, dtype=float).reshape(-1, 2)
         self.n = n = positions.shape[0]
-        self.radii = {LOS: r_safe / 2.0, NMAC: nmac / 2.0, RANGE: sensor_range / 2.0}
+        self.distances = {LOS: float(r_safe), NMAC: float(nmac), RANGE: float(sensor_range)}
+        reach = max(self.distances.values())
+        self.margin = float(MARGIN_FRACTION * reach if margin is None else margin)
         self.spatial_hash = bool(spatial_hash)
         self.in_space = np.ones(n, dtype=bool) if in_space is None else np.array(in_space, bool)
+        self.positions = positions.copy()
+        self.refreshes = 0
+        self._velocities = np.zeros((n, 2))
+        self._flown = 0.0  # largest distance any aircraft may have flown since the refresh
+        self._build(positions)
         self.pairs = {t: np.zeros(0, dtype=np.int64) for t in SETS}
-        self.began = {t: np.zeros((0, 2), dtype=np.int64) for t in SETS}
-        primed = self._build(positions, np.zeros((n, 2)))
-        self.pairs = primed  # the pairs that overlap at the start all begin now
-        nn = max(n, 1)
-        self.began = {t: np.stack([k // nn, k % nn], axis=1) for t, k in primed.items()}
+        self._update_sets(reset_began=True)  # the pairs in a set at the start all begin now
 
     # ---------------------------------------------------------------- helpers
-    def _build(self, positions: np.ndarray, velocities: np.ndarray) -> dict:
-        """Create the spaces, the bodies (all N in each, those in :attr:`in_space` added),
-        the handlers and the batch buffers, with an arbiter for every pair overlapping at
-        ``positions`` (N, 2) m; leave the body velocities at ``velocities`` (N, 2) m/s.
-
-        A zero-velocity step (``p + 0·dt = p`` exactly) makes pymunk create an arbiter for
-        every overlapping pair, so that the next step fires ``separate`` for a pair that
-        stops overlapping and no second ``begin`` for one that still overlaps. The ``begin``
-        handler is installed after that step: its ~25k begins at 1000 aircraft would be as
-        many Python calls; the arbiters are read in one batch call instead.
-
-        Returns set → (P,) sorted keys of the overlapping pairs.
-        """
+    def _build(self, positions: np.ndarray) -> None:
+        """Create the space and the bodies (all N, those in :attr:`in_space` added) at
+        ``positions`` (N, 2) m and the batch buffers, and find the candidate pairs there
+        (:attr:`_candidates`, one zero-velocity step: ``p + 0·dt = p`` exactly)."""
         n = self.n
-        self._log = log = _EventLog()
-        self.spaces: dict[int, pymunk.Space] = {}
-        self.bodies: dict[int, list[pymunk.Body]] = {}
-        self.shapes: dict[int, list[pymunk.Shape]] = {}
-        self._order: dict[int, np.ndarray] = {}
-        self._ids_sorted: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # body ids, sorted
         self._buf_get = pymunk.batch.Buffer()
         self._buf_set = pymunk.batch.Buffer()
-        self._vbuf = np.zeros(0)
-        primed = {}
-        for t in SETS:
-            space = pymunk.Space()
-            bodies, shapes = [], []
-            for i in range(n):
-                body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
-                body.position = (float(positions[i, 0]), float(positions[i, 1]))
-                body._aircraft = i
-                c = pymunk.Circle(body, self.radii[t])
-                c.sensor = True
-                c.collision_type = t
-                if self.in_space[i]:
-                    space.add(body, c)
-                bodies.append(body)
-                shapes.append(c)
-            # An arbiter keeps the handler it was created with: ``separate`` must be in
-            # place before the priming step, ``begin`` only after it (same handler struct).
-            space.on_collision(t, t, separate=log.separate)
-            if t == RANGE and self.spatial_hash and n:
-                space.use_spatial_hash(float(2.0 * self.radii[RANGE]), 4 * n)
-            self.spaces[t], self.bodies[t], self.shapes[t] = space, bodies, shapes
-            ids = np.array([b.id for b in bodies], dtype=np.uintp)
-            by_id = np.argsort(ids)
-            self._ids_sorted[t] = (ids[by_id], by_id)
-            self._refresh_order(t)
-            if self._order[t].size:
-                self._set_velocities(t, np.zeros((n, 2)))
-                space.step(1.0)
-            primed[t] = self._arbiter_keys(t)
-            space.on_collision(t, t, begin=log.begin)
-            self._set_velocities(t, velocities)
-            for i in np.flatnonzero(~self.in_space):  # bodies outside the space keep theirs
-                bodies[i].velocity = (float(velocities[i, 0]), float(velocities[i, 1]))
-        return primed
+        self._pbuf = np.zeros(0)
+        radius = (max(self.distances.values()) + self.margin) / 2.0
+        self.space = space = pymunk.Space()
+        self.bodies: list[pymunk.Body] = []
+        self.shapes: list[pymunk.Shape] = []
+        for i in range(n):
+            body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+            body.position = (float(positions[i, 0]), float(positions[i, 1]))
+            body._aircraft = i
+            c = pymunk.Circle(body, radius)
+            c.sensor = True
+            if self.in_space[i]:
+                space.add(body, c)
+            self.bodies.append(body)
+            self.shapes.append(c)
+        # an arbiter not touched in a step is dropped at once: the arbiters after a step
+        # are the overlapping pairs (sensors' arbiters hold no contacts worth keeping)
+        space.collision_persistence = 1
+        if self.spatial_hash and n:
+            space.use_spatial_hash(float(2.0 * radius), 4 * n)
+        ids = np.array([b.id for b in self.bodies], dtype=np.uintp)
+        by_id = np.argsort(ids)
+        self._ids_sorted = (ids[by_id], by_id)
+        self._refresh_order()
+        if self._order.size:
+            space.step(1.0)  # every body has velocity 0 and keeps it
+        self._candidates = self._arbiter_keys()
 
-    def _refresh_order(self, t: int) -> None:
-        """Aircraft index (B,) of each body of space ``t`` in pymunk's iteration order."""
+    def _refresh_order(self) -> None:
+        """Aircraft index (B,) of each body in the space in pymunk's iteration order."""
         self._buf_get.clear()
-        pymunk.batch.get_space_bodies(
-            self.spaces[t], pymunk.batch.BodyFields.BODY_ID, self._buf_get
-        )
-        self._order[t] = self._aircraft_of(t, np.frombuffer(self._buf_get.int_buf(), np.uintp))
+        pymunk.batch.get_space_bodies(self.space, pymunk.batch.BodyFields.BODY_ID, self._buf_get)
+        self._order = self._aircraft_of(np.frombuffer(self._buf_get.int_buf(), np.uintp))
 
-    def _aircraft_of(self, t: int, body_ids: np.ndarray) -> np.ndarray:
-        """Aircraft indices (K,) int64 of pymunk body ids (K,) of space ``t``."""
-        ids, by_id = self._ids_sorted[t]
+    def _aircraft_of(self, body_ids: np.ndarray) -> np.ndarray:
+        """Aircraft indices (K,) int64 of pymunk body ids (K,)."""
+        ids, by_id = self._ids_sorted
         return by_id[np.searchsorted(ids, body_ids)].astype(np.int64)
 
-    def _arbiter_keys(self, t: int) -> np.ndarray:
-        """(P,) sorted keys of the pairs with an arbiter in space ``t`` (right after a step
-        of a new space: exactly the overlapping pairs)."""
+    def _arbiter_keys(self) -> np.ndarray:
+        """(P,) sorted keys of the pairs with an arbiter (right after a step: exactly the
+        overlapping pairs, collision persistence being 1)."""
         self._buf_get.clear()
-        pymunk.batch.get_space_arbiters(self.spaces[t], _ARBITER_BODIES, self._buf_get)
-        ab = self._aircraft_of(t, np.frombuffer(self._buf_get.int_buf(), np.uintp)).reshape(-1, 2)
+        pymunk.batch.get_space_arbiters(self.space, _ARBITER_BODIES, self._buf_get)
+        ab = self._aircraft_of(np.frombuffer(self._buf_get.int_buf(), np.uintp)).reshape(-1, 2)
         n = max(self.n, 1)
         return np.unique(ab.min(axis=1) * n + ab.max(axis=1))
 
-    def _set_velocities(self, t: int, velocities: np.ndarray) -> None:
-        v = np.ascontiguousarray(np.asarray(velocities, dtype=float)[self._order[t]])
-        self._vbuf = v  # keep the memory alive while pymunk reads it
-        self._buf_set.set_float_buf(v.reshape(-1))
-        pymunk.batch.set_space_bodies(
-            self.spaces[t], pymunk.batch.BodyFields.VELOCITY, self._buf_set
-        )
+    def _refresh(self) -> None:
+        """Find the candidates again at the current positions: bodies moved there in one
+        batch call, one step (velocities stay 0), the arbiters read in another."""
+        if self._order.size:
+            p = np.ascontiguousarray(self.positions[self._order])
+            self._pbuf = p  # keep the memory alive while pymunk reads it
+            self._buf_set.set_float_buf(p.reshape(-1))
+            pymunk.batch.set_space_bodies(
+                self.space, pymunk.batch.BodyFields.POSITION, self._buf_set
+            )
+            self.space.step(1.0)
+        self._candidates = self._arbiter_keys()
+        self._flown = 0.0
+        self.refreshes += 1
 
-    def _drain(self, reset_began: bool = True) -> None:
-        """Fold the recorded events into the pair sets (and :attr:`began`)."""
-        events = self._log.events
-        self._log.events = []
+    def _update_sets(self, reset_began: bool = True) -> None:
+        """The three exact sets from the candidates at :attr:`positions`; :attr:`began`
+        their new keys (added to it unless ``reset_began``)."""
+        d = self.distances
+        sets = _exact_pairs(
+            self._candidates,
+            max(self.n, 1),
+            self.positions,
+            d[LOS] * d[LOS],
+            d[NMAC] * d[NMAC],
+            d[RANGE] * d[RANGE],
+        )
         n = max(self.n, 1)
-        ev = np.array(events, dtype=np.int64).reshape(-1, 4)
-        keys = np.minimum(ev[:, 1], ev[:, 2]) * n + np.maximum(ev[:, 1], ev[:, 2])
-        for t in SETS:
-            mine = ev[:, 0] == t
-            b = np.unique(keys[mine & (ev[:, 3] > 0)])
-            e = keys[mine & (ev[:, 3] < 0)]
-            k = self.pairs[t]
-            if e.size:
-                k = _delete_sorted(k, e)
-            if b.size:
-                k = _insert_sorted(k, b)
-            self.pairs[t] = k
-            new = np.stack([b // n, b % n], axis=1)
-            self.began[t] = new if reset_began else np.concatenate([self.began[t], new])
+        began = {}
+        for t, keys in zip(SETS, sets):
+            new = _new_keys(keys, self.pairs[t])
+            b = np.stack([new // n, new % n], axis=1)
+            began[t] = b if reset_began else np.concatenate([self.began[t], b])
+            self.pairs[t] = keys
+        self.began = began
 
     # ----------------------------------------------------------------- public
     def set_velocities(self, velocities: np.ndarray) -> None:
         """Set every body's velocity (N, 2) m/s (rows of removed aircraft are ignored)."""
-        for t in SETS:
-            self._set_velocities(t, velocities)
+        self._velocities = np.array(velocities, dtype=float).reshape(self.n, 2)
 
     def step(self, dt: float, out_positions: np.ndarray) -> None:
-        """Advance ``dt`` seconds; write the new positions of bodies in the space into
+        """Advance ``dt`` seconds; write the new positions of the aircraft in the space into
         ``out_positions`` (N, 2) and update :attr:`pairs` / :attr:`began`."""
-        for t in SETS:
-            if self._order[t].size:
-                self.spaces[t].step(dt)
-        if self._order[RANGE].size:  # the three copies of a body are at the same place
-            self._buf_get.clear()
-            pymunk.batch.get_space_bodies(
-                self.spaces[RANGE], pymunk.batch.BodyFields.POSITION, self._buf_get
-            )
-            out_positions[self._order[RANGE]] = np.frombuffer(self._buf_get.float_buf()).reshape(
-                -1, 2
-            )
-        self._drain()
+        live = self.in_space
+        if live.any():
+            v = self._velocities[live]
+            self.positions[live] += v * dt  # chipmunk's kinematic update: p + v·dt
+            self._flown += float(np.sqrt((v * v).sum(axis=1)).max()) * abs(dt)
+            out_positions[live] = self.positions[live]
+        if 2.0 * self._flown > self.margin * (1.0 - _MARGIN_SLACK):
+            self._refresh()
+        self._update_sets()
 
     def remove(self, indices) -> None:
-        """Take aircraft out of the spaces (they stop touching anything at once)."""
+        """Take aircraft out of the space (they leave every set at once)."""
         idx = [int(i) for i in np.atleast_1d(indices) if self.in_space[int(i)]]
         if not idx:
             return
-        for t in SETS:
-            for i in idx:
-                self.spaces[t].remove(self.bodies[t][i], self.shapes[t][i])
+        for i in idx:
+            self.space.remove(self.bodies[i], self.shapes[i])
         self.in_space[idx] = False
-        for t in SETS:
-            self._refresh_order(t)
-        self._drain(reset_began=False)
+        self._refresh_order()
+        n = max(self.n, 1)
+        k = self._candidates
+        self._candidates = k[self.in_space[k // n] & self.in_space[k % n]]
+        self._update_sets(reset_began=False)
 
     def add(self, indices, positions) -> None:
-        """Put aircraft (k,) that are outside back into the spaces at ``positions`` (k, 2) m;
-        their pairs begin with the next :meth:`step`."""
+        """Put aircraft (k,) that are outside back into the space at ``positions`` (k, 2) m;
+        their pairs begin with the next :meth:`step`, which finds the candidates again."""
         idx = np.atleast_1d(np.asarray(indices, dtype=np.int64))
         pos = np.asarray(positions, dtype=float).reshape(-1, 2)
         new = [(int(i), p) for i, p in zip(idx, pos) if not self.in_space[int(i)]]
         if not new:
             return
-        for t in SETS:
-            for i, p in new:
-                body = self.bodies[t][i]
-                body.position = (float(p[0]), float(p[1]))
-                body.velocity = (0.0, 0.0)
-                self.spaces[t].add(body, self.shapes[t][i])
+        for i, p in new:
+            body = self.bodies[i]
+            body.position = (float(p[0]), float(p[1]))
+            self.positions[i] = p
+            self.space.add(body, self.shapes[i])
         self.in_space[[i for i, _ in new]] = True
-        for t in SETS:
-            self._refresh_order(t)
+        self._refresh_order()
+        self._flown = math.inf  # the new bodies' candidates are unknown until a refresh
 
     def pair_arrays(self, kind: int) -> tuple[np.ndarray, np.ndarray]:
-        """Current overlapping pairs of a set as (i, j) int64 arrays, i < j, sorted."""
+        """Current pairs of a set as (i, j) int64 arrays, i < j, sorted."""
         k = self.pairs[kind]
         n = max(self.n, 1)
         return k // n, k % n
 
     # --------------------------------------------------------------- pickling
     def __getstate__(self) -> dict:
-        """The airspace as plain data: radii, positions (N, 2) m and velocities (N, 2) m/s of
-        all bodies, membership, pair sets and pending events.
+        """The airspace as plain data: distances, margin, positions (N, 2) m and velocities
+        (N, 2) m/s, the bodies' positions (where the candidates were found), the distance
+        flown since, membership, candidates, pair sets and the last step's began pairs.
 
         The pymunk objects are not pickled: the batch buffers are cffi memory, and pymunk's
-        own ``Space`` pickling restores cached arbiters that no longer fire ``separate`` (a
-        copy misses the end of every pair that overlapped when it was saved) and costs
-        O(arbiters × shapes). :meth:`__setstate__` rebuilds the spaces instead.
+        own ``Space`` pickling costs O(arbiters × shapes). :meth:`__setstate__` rebuilds
+        the space instead.
         """
-        bodies = self.bodies[RANGE]
         return {
             "n": self.n,
-            "radii": dict(self.radii),
+            "distances": dict(self.distances),
+            "margin": self.margin,
             "spatial_hash": self.spatial_hash,
             "in_space": self.in_space.copy(),
-            "positions": np.array([tuple(b.position) for b in bodies], float).reshape(-1, 2),
-            "velocities": np.array([tuple(b.velocity) for b in bodies], float).reshape(-1, 2),
+            "positions": self.positions.copy(),
+            "velocities": self._velocities.copy(),
+            "body_positions": np.array([tuple(b.position) for b in self.bodies], float).reshape(
+                -1, 2
+            ),
+            "flown": self._flown,
+            "refreshes": self.refreshes,
+            "candidates": self._candidates.copy(),
             "pairs": {t: k.copy() for t, k in self.pairs.items()},
             "began": {t: b.copy() for t, b in self.began.items()},
-            "events": list(self._log.events),
         }
 
     def __setstate__(self, state: dict) -> None:
-        """Rebuild the spaces from :meth:`__getstate__`'s data, with an arbiter for every
-        pair that overlaps (see :meth:`_build`), and check that those pairs are the stored
-        ones.
-
-        The stored pair sets stay authoritative; the contacts the rebuilt spaces find at
-        the same positions must equal them, or the copy would fire other events than the
-        original from the next step on.
-        """
+        """Rebuild the space from :meth:`__getstate__`'s data (see :meth:`_build`), and
+        check the candidates it finds and the exact sets they give against the stored
+        ones."""
         self.n = int(state["n"])
-        self.radii = dict(state["radii"])
+        self.distances = dict(state["distances"])
+        self.margin = float(state["margin"])
         self.spatial_hash = bool(state["spatial_hash"])
         self.in_space = np.array(state["in_space"], dtype=bool)
-        found = self._build(
-            np.asarray(state["positions"], float), np.asarray(state["velocities"], float)
-        )
-        self._log.events = list(state["events"])
+        self.positions = np.array(state["positions"], dtype=float).reshape(-1, 2)
+        self._velocities = np.array(state["velocities"], dtype=float).reshape(-1, 2)
+        self._flown = float(state["flown"])
+        self.refreshes = int(state["refreshes"])
+        self._build(np.asarray(state["body_positions"], float).reshape(-1, 2))
+        stored = np.array(state["candidates"], dtype=np.int64)
+        self._check("candidates", self._candidates, stored)
         self.pairs = {t: np.array(k, dtype=np.int64) for t, k in state["pairs"].items()}
         self.began = {t: np.array(b, dtype=np.int64) for t, b in state["began"].items()}
-        for t in SETS:
-            if not np.array_equal(found[t], self.pairs[t]):
-                extra = np.setdiff1d(found[t], self.pairs[t])
-                missing = np.setdiff1d(self.pairs[t], found[t])
-                raise RuntimeError(
-                    f"Airspace: rebuilt contacts of set {t} differ from the stored pairs "
-                    f"(extra keys {extra[:5].tolist()}, missing {missing[:5].tolist()})"
-                )
+        d = self.distances
+        found = _exact_pairs(stored, max(self.n, 1), self.positions, *(d[t] * d[t] for t in SETS))
+        for t, keys in zip(SETS, found):
+            self._check(f"set {t}", keys, self.pairs[t])
+
+    @staticmethod
+    def _check(what: str, found: np.ndarray, stored: np.ndarray) -> None:
+        if not np.array_equal(found, stored):
+            extra = np.setdiff1d(found, stored)
+            missing = np.setdiff1d(stored, found)
+            raise RuntimeError(
+                f"Airspace: rebuilt contacts of {what} differ from the stored pairs "
+                f"(extra keys {extra[:5].tolist()}, missing {missing[:5].tolist()})"
+            )

@@ -183,6 +183,9 @@ class AvoidancePolicy:
                 pred = mode_predictions(
                     tracks, view, enc, positions, velocities, self.dt, self.prediction_times_s
                 )
+            # a kept side needs only that side's best blocked candidate (see _commit)
+            commits = res.uses_committed_side and res.reports_band and self.preference != "none"
+            side = {"committed_side": self.side[enc.owners]} if commits else {}
             out = res.resolve(
                 velocities[enc.owners],
                 enc.rel_position,
@@ -191,6 +194,7 @@ class AvoidancePolicy:
                 np.maximum(mx, self.search_range),
                 mode_predictions=pred,
                 turn_rate=mx / self.dt if res.uses_turn_rate else None,
+                **side,
             )
             psi = np.asarray(out.heading_change, dtype=float)
             c = np.asarray(out.conflict, dtype=bool)
