@@ -749,7 +749,8 @@ def from_dict(
     """Validate a TOML-like dict (after applying ``overrides``) into a :class:`Scenario`.
 
     With ``runnable`` (what :func:`load` asks for a scenario file) a table with no keys, or
-    a scenario with no aircraft and no traffic, is refused: there is nothing to simulate.
+    a scenario with no aircraft, no traffic and no recorded file, is refused: there is
+    nothing to simulate.
     Without it such a scenario is a configuration code builds (defaults, a resolver's
     parameters)."""
     import copy
@@ -772,10 +773,10 @@ def from_dict(
         check_parts(sc)
     except Invalid as exc:
         raise UserError(_where(exc, source, set_paths)) from None
-    if runnable and not sc.aircraft and sc.traffic.count == 0:
+    if runnable and not sc.aircraft and sc.traffic.count == 0 and not sc.recorded.file:
         raise UserError(
-            f"{source}: aircraft: expected at least one aircraft ([[aircraft]] tables or "
-            "[traffic] with a count), got none: nothing to simulate"
+            f"{source}: aircraft: expected at least one aircraft ([[aircraft]] tables, "
+            "[traffic] with a count or a [recorded] file), got none: nothing to simulate"
         )
     return sc
 
