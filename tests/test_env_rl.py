@@ -245,3 +245,19 @@ def test_a_randomised_multi_agent_env_pickles_mid_episode():
         o2, r2, *_ = copy.step(act)
         assert r1 == r2 and all(np.array_equal(o1[a], o2[a]) for a in o1)
     assert np.array_equal(env.state(), copy.state())
+
+
+def test_bench_env_command(tmp_path, capsys):
+    import json
+
+    from airspace_sim.cli import main
+
+    out = tmp_path / "bench.json"
+    args = ["bench-env", "--env", "head_on", "--steps", "5", "--repeats", "1"]
+    assert main(args + ["--json", str(out)]) == 0
+    r = json.loads(out.read_text())
+    assert r["agents"] == 1 and r["env_ms_per_step"] > 0 and r["world_ms_per_step"] > 0
+    assert "env / world" in capsys.readouterr().out
+    assert main(args + ["--json", str(tmp_path / "missing" / "b.json")]) == 2
+    err = capsys.readouterr().err
+    assert "no such folder" in err and err.count("\n") == 1
