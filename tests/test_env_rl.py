@@ -229,3 +229,35 @@ def test_pettingzoo_parallel_api_test_on_a_multi_agent_ring():
     from pettingzoo.test import parallel_api_test
 
     parallel_api_test(aenv.make("ring4", max_cycles=20), num_cycles=25)
+
+
+def test_a_randomised_multi_agent_env_pickles_mid_episode():
+    import pickle
+
+    env = aenv.make("ring4", max_cycles=30)
+    env.reset(seed=4, options={"traffic_count": 3})
+    for _ in range(5):
+        env.step({a: np.full(1, 0.2, np.float32) for a in env.agents})
+    copy = pickle.loads(pickle.dumps(env))
+    for _ in range(10):
+        act = {a: np.full(1, -0.4, np.float32) for a in env.agents}
+        o1, r1, *_ = env.step(act)
+        o2, r2, *_ = copy.step(act)
+        assert r1 == r2 and all(np.array_equal(o1[a], o2[a]) for a in o1)
+    assert np.array_equal(env.state(), copy.state())
+
+
+def test_bench_env_command(tmp_path, capsys):
+    import json
+
+    from airspace_sim.cli import main
+
+    out = tmp_path / "bench.json"
+    args = ["bench-env", "--env", "head_on", "--steps", "5", "--repeats", "1"]
+    assert main(args + ["--json", str(out)]) == 0
+    r = json.loads(out.read_text())
+    assert r["agents"] == 1 and r["env_ms_per_step"] > 0 and r["world_ms_per_step"] > 0
+    assert "env / world" in capsys.readouterr().out
+    assert main(args + ["--json", str(tmp_path / "missing" / "b.json")]) == 2
+    err = capsys.readouterr().err
+    assert "no such folder" in err and err.count("\n") == 1

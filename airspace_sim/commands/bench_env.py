@@ -1,7 +1,7 @@
 """``airspace-sim bench-env``: PettingZoo env steps per second against its bare world.
 
-Times the parallel env with random actions, the world of the same scenario with built-in
-pilots (the peer), and resets (:func:`airspace_sim.env.benchmark.bench_env`); with
+Times the parallel env with random actions, the bare world underneath with the same random
+turns (the peer), and resets (:func:`airspace_sim.env.benchmark.bench_env`); with
 ``--pettingzoo`` also runs PettingZoo's ``performance_benchmark`` (5 s)::
 
     airspace-sim bench-env

@@ -4,8 +4,9 @@
 
 - ``env``: parallel-env steps with random actions (every agent, every step), headless,
   resetting when the episode ends (resets timed apart);
-- ``world``: the bare :meth:`World.step` of the same scenario with its built-in pilots (the
-  peer: env steps / world steps says what the env layer costs on top);
+- ``world``: the bare :meth:`World.step` of the same world, its agents turning at random as
+  in the env (the peer: env time / world time per step says what the env layer costs on
+  top: observations, rewards, infos);
 - ``reset``: ``env.reset(seed=k)`` for fresh seeds, in world steps (a reset should cost at
   most a few);
 - optionally PettingZoo's own ``pettingzoo.test.performance_benchmark`` on the AEC form
@@ -47,7 +48,6 @@ def bench_env(
     """Steps per second of the env ``env_id`` (a registry id or scenario name) and of its
     world, reset cost, per the module docstring. Returns a dict of the medians."""
     from airspace_sim.env import make
-    from airspace_sim.world import World
 
     env = make(env_id, **env_kwargs)
     rng = np.random.default_rng(seed)
@@ -67,15 +67,18 @@ def bench_env(
     env_rows = [_timed(env_step, steps) for _ in range(repeats)]
 
     def fresh_world():
-        return World(env.scenario, seed=seed)
+        return env._make_world(env.scenario, seed)  # the env's agents, controlled
 
     world = fresh_world()
     holder = {"w": world}
 
     def world_step():
-        if holder["w"].done:
-            holder["w"] = fresh_world()
-        holder["w"].step()
+        w = holder["w"]
+        if w.done or not (w.controlled & w.active).any():
+            holder["w"] = w = fresh_world()
+        # the same work as the env's step: every agent turns at random
+        rates = np.where(w.controlled, rng.uniform(-1.0, 1.0, w.n) * w.max_turn_rate, np.nan)
+        w.step(rates)
 
     for _ in range(20):
         world_step()

@@ -67,6 +67,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from gymnasium import spaces
+from numba import njit
 
 V_REF = 300.0  #: m/s, speed normalisation
 #: discrete action index -> fraction of the turn-rate limit (CCW +): hard left .. hard right
@@ -268,7 +269,7 @@ def encode_intruders_batch(
     are ignored; unused rows are zero (mask 0).
     """
     A = len(heading)
-    K, F, M = layout.n_intruders, layout.intruder_size, layout.n_modes
+    K, F = layout.n_intruders, layout.intruder_size
     out = np.zeros((A, K, F), dtype=np.float64)
     x = np.asarray(x, dtype=np.float64).reshape(-1, 5)
     slot = np.asarray(slot, dtype=np.int64).reshape(-1)
@@ -281,52 +282,71 @@ def encode_intruders_batch(
         x, P, mu, slot = x[ok], P[ok], mu[ok], slot[ok]
         if len(x) == 0:
             return out
-    own_pos = np.asarray(own_pos, dtype=np.float64)
-    own_vel = np.asarray(own_vel, dtype=np.float64)
-    heading = np.asarray(heading, dtype=np.float64)
-    rel_p = x[:, [0, 2]] - own_pos[slot]
-    rel_v = x[:, [1, 3]] - own_vel[slot]
-    dist = np.hypot(rel_p[:, 0], rel_p[:, 1])
+    own_pos = np.ascontiguousarray(own_pos, dtype=np.float64)
+    own_vel = np.ascontiguousarray(own_vel, dtype=np.float64)
+    heading = np.ascontiguousarray(heading, dtype=np.float64)
+    dist = np.hypot(x[:, 0] - own_pos[slot, 0], x[:, 2] - own_pos[slot, 1])
     order = np.lexsort((np.arange(len(x)), dist, slot))  # by ownship, then range
-    s_slot = slot[order]
-    rank = np.arange(len(order)) - np.searchsorted(s_slot, s_slot, side="left")
-    keep = rank < K
-    order, s_slot, rank = order[keep], s_slot[keep], rank[keep]
-    c = np.cos(heading[s_slot])
-    s = np.sin(heading[s_slot])
-    rp, rv = rel_p[order], rel_v[order]
-    # world frame -> body frame (x forward, y left)
-    rp = np.stack([c * rp[:, 0] + s * rp[:, 1], -s * rp[:, 0] + c * rp[:, 1]], axis=1)
-    rv = np.stack([c * rv[:, 0] + s * rv[:, 1], -s * rv[:, 0] + c * rv[:, 1]], axis=1)
-    pxx, pxy, pyy = P[order, 0, 0], P[order, 0, 2], P[order, 2, 2]
-    vx = c * c * pxx + 2 * c * s * pxy + s * s * pyy
-    vy = s * s * pxx - 2 * c * s * pxy + c * c * pyy
-    cxy = -c * s * pxx + (c * c - s * s) * pxy + c * s * pyy
-    sx = np.sqrt(np.clip(vx, 0, None))
-    sy = np.sqrt(np.clip(vy, 0, None))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        rho = np.where(sx * sy > 0, cxy / (sx * sy), 0.0)
-        # closest point of approach on straight lines
-        vv = np.sum(rv * rv, axis=1)
-        tcpa = np.where(vv > 1e-9, -np.sum(rp * rv, axis=1) / vv, 0.0)
-    miss = rp + rv * np.clip(tcpa, 0, None)[:, None]
-    dcpa = np.hypot(miss[:, 0], miss[:, 1])
-    rng_, r_safe = layout.sensor_range, layout.r_safe
-    rows = np.zeros((len(order), F))
-    rows[:, 0] = 1.0
-    rows[:, 1:3] = rp / rng_
-    rows[:, 3:5] = rv / (2 * V_REF)
-    rows[:, 5] = dist[order] / rng_
-    rows[:, 6] = sx / r_safe
-    rows[:, 7] = sy / r_safe
-    rows[:, 8] = rho
-    rows[:, 9] = tcpa / layout.lookahead
-    rows[:, 10] = dcpa / (2 * r_safe)
-    if M and mu.shape[1]:
-        m = min(M, mu.shape[1])
-        rows[:, 11 : 11 + m] = mu[order, :m]
-    out[s_slot, rank] = rows
+    _encode_rows(
+        order,
+        slot,
+        dist,
+        np.ascontiguousarray(x),
+        np.ascontiguousarray(P),
+        np.ascontiguousarray(mu),
+        own_pos,
+        own_vel,
+        heading,
+        layout.sensor_range,
+        layout.r_safe,
+        layout.lookahead,
+        out,
+    )
     return out
+
+
+@njit(cache=True, error_model="numpy")
+def _encode_rows(order, slot, dist, x, P, mu, own_pos, own_vel, heading, rng_, r_safe, look, out):
+    """The rows of :func:`encode_intruders_batch`, written into ``out`` (A, K, F): tracks
+    in ``order`` (by ownship, then range), the first K of each ownship."""
+    K, F = out.shape[1], out.shape[2]
+    m = min(F - 11, mu.shape[1])
+    prev, rank = -1, 0
+    for q in range(order.size):
+        t = order[q]
+        a = slot[t]
+        if a != prev:
+            prev, rank = a, 0
+        if rank >= K:
+            continue
+        c, s = math.cos(heading[a]), math.sin(heading[a])
+        dx, dy = x[t, 0] - own_pos[a, 0], x[t, 2] - own_pos[a, 1]
+        dvx, dvy = x[t, 1] - own_vel[a, 0], x[t, 3] - own_vel[a, 1]
+        # world frame -> body frame (x forward, y left)
+        px, py = c * dx + s * dy, -s * dx + c * dy
+        vx, vy = c * dvx + s * dvy, -s * dvx + c * dvy
+        pxx, pxy, pyy = P[t, 0, 0], P[t, 0, 2], P[t, 2, 2]
+        var_x = c * c * pxx + 2 * c * s * pxy + s * s * pyy
+        var_y = s * s * pxx - 2 * c * s * pxy + c * c * pyy
+        cov = -c * s * pxx + (c * c - s * s) * pxy + c * s * pyy
+        sx, sy = math.sqrt(max(var_x, 0.0)), math.sqrt(max(var_y, 0.0))
+        rho = cov / (sx * sy) if sx * sy > 0 else 0.0
+        # closest point of approach on straight lines
+        vv = vx * vx + vy * vy
+        tcpa = -(px * vx + py * vy) / vv if vv > 1e-9 else 0.0
+        ahead = max(tcpa, 0.0)
+        row = out[a, rank]
+        row[0] = 1.0
+        row[1], row[2] = px / rng_, py / rng_
+        row[3], row[4] = vx / (2 * V_REF), vy / (2 * V_REF)
+        row[5] = dist[t] / rng_
+        row[6], row[7] = sx / r_safe, sy / r_safe
+        row[8] = rho
+        row[9] = tcpa / look
+        row[10] = math.hypot(px + vx * ahead, py + vy * ahead) / (2 * r_safe)
+        for k in range(m):
+            row[11 + k] = mu[t, k]
+        rank += 1
 
 
 def finish(layout: ObservationLayout, own: np.ndarray, intruders: np.ndarray) -> np.ndarray:
