@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_cli_run import cli
 
 from airspace_sim import registry
 from airspace_sim.dynamics import presets
@@ -171,18 +172,6 @@ def test_cli_reports_broken_plugin_in_one_line(tmp_path):
     )
 
 
-def _cli(*args, cwd):
-    env = {**os.environ, "AIRSPACE_SIM_PLUGINS": ""}
-    return subprocess.run(
-        [sys.executable, "-m", "airspace_sim", *args],
-        cwd=cwd,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-
-
 @pytest.mark.parametrize(
     "source,needle",
     [
@@ -194,7 +183,7 @@ def _cli(*args, cwd):
 def test_plugin_that_exits_at_import_is_one_line_and_exit_2(tmp_path, source, needle):
     (tmp_path / "plugins").mkdir()
     (tmp_path / "plugins" / "quits.py").write_text(source)
-    proc = _cli("run", "head_on", "--steps", "1", cwd=tmp_path)
+    proc = cli("run", "head_on", "--steps", "1", cwd=tmp_path)
     assert proc.returncode == 2, proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
@@ -206,7 +195,7 @@ def test_plugin_that_exits_at_import_is_one_line_and_exit_2(tmp_path, source, ne
 def test_a_failed_plugin_marks_every_scenario_of_run_list(tmp_path):
     (tmp_path / "plugins").mkdir()
     (tmp_path / "plugins" / "quits.py").write_text("import sys\nsys.exit(3)\n")
-    proc = _cli("run", "--list", cwd=tmp_path)
+    proc = cli("run", "--list", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     lines = proc.stdout.strip().splitlines()
     from airspace_sim.scenarios import available
@@ -232,7 +221,7 @@ def test_a_failed_plugin_is_raised_by_every_lookup(clean_registry):
 def test_shipped_plugins_are_found_outside_the_repository(tmp_path):
     """An installed airspace-sim (here the editable install, run from a folder with no
     plugins/) finds kalman and mvp through its own entry points."""
-    proc = _cli(
+    proc = cli(
         "run", "head_on", "--steps", "3", "--quiet",
         "--set", 'tracker.kind="kalman"', "--set", 'resolver.kind="mvp"',
         cwd=tmp_path,

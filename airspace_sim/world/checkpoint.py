@@ -28,6 +28,7 @@ World pickled by other code may not load or may step differently). Every problem
 from __future__ import annotations
 
 import errno
+import functools
 import hashlib
 import hmac
 import json
@@ -106,6 +107,7 @@ def _mac(key: bytes, header_line: bytes, blob: bytes) -> str:
 # --------------------------------------------------------------------------- saving
 
 
+@functools.cache  # the sources do not change under a running process
 def code_fingerprint() -> str:
     """SHA-256 (hex, 16 digits) of the ``airspace_sim`` package's Python sources.
 
