@@ -181,15 +181,12 @@ MIN_SPEED = 1.0
 MAX_TIME_S = 1e7  #: durations and time constants: about 4 months
 MAX_LOOKAHEAD_S = 3600.0
 MAX_STEPS = 10_000_000  #: duration / dt
-MAX_AIRCRAFT = 10_000  #: generated traffic (the track table grows as N²)
+#: aircraft in all: per-aircraft arrays are checked here; the track table, which grows with
+#: the pairs in sensor range, is checked when it grows (:mod:`airspace_sim.resources`)
+MAX_AIRCRAFT = 100_000
 MAX_PROBABILITY_SAMPLES = 1000
 MIN_DT_S = 1e-3  #: a shorter step only multiplies the work; 5e-324 overflowed duration / dt
 MAX_HEADING_DEG = 360.0  #: headings within ±360° (one turn either way)
-#: Estimated bytes of one track (IMM filter state of every mode plus bookkeeping; measured
-#: with tracemalloc on a ring whose aircraft all see each other, docs/bad-input.md).
-TRACK_BYTES = 5 * 1024
-#: Fraction of the machine's physical memory the worst-case track table may take.
-MEMORY_FRACTION = 0.5
 
 POSITIVE = _range(0, lo_open=True)
 NON_NEGATIVE = _range(0)
@@ -235,6 +232,12 @@ RANGES: dict[str, Callable[[Any], str | None]] = {
     "AircraftSpec.speed": _range(MIN_SPEED, MAX_SPEED, unit="m/s"),
     "AircraftSpec.autopilot": _one_of_registry("autopilot"),
     "AircraftSpec.max_turn_rate_deg": _range(0, 3600.0, unit="deg/s"),
+    "RecordedSpec.start_s": _range(0, MAX_TIME_S, unit="s"),
+    "RecordedSpec.centre_lat_deg": _range(-90.0, 90.0, unit="deg"),
+    "RecordedSpec.centre_lon_deg": _range(-180.0, 180.0, unit="deg"),
+    "RecordedSpec.min_altitude_ft": _range(-2000.0, 100_000.0, unit="ft"),
+    "RecordedSpec.max_altitude_ft": _range(-2000.0, 100_000.0, unit="ft"),
+    "RecordedSpec.max_gap_s": _range(0, MAX_TIME_S, lo_open=True, unit="s"),
     "TrafficSpec.pattern": _one_of(TRAFFIC_PATTERNS),
     "TrafficSpec.count": _range(0, MAX_AIRCRAFT, integer=True),
     "TrafficSpec.radius": _range(0, MAX_DISTANCE_M, lo_open=True, unit="m"),
@@ -546,46 +549,6 @@ def check_scenario(sc: Scenario) -> None:
             "traffic.pattern",
             "expected an aircraft[0] (the ownship) for pattern 'encounter', got none",
         )
-    _check_memory(sc)
-
-
-def physical_memory_bytes() -> int | None:
-    """The machine's physical memory in bytes, or None where the OS does not say."""
-    try:
-        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    except (AttributeError, ValueError, OSError):
-        return None
-
-
-def track_table_bytes(sc: Scenario) -> int:
-    """Worst-case bytes of the scenario's track table: every tracking aircraft (avoiding or
-    an RL agent; generated traffic avoids unless the encounter pattern makes it
-    non-cooperative) holding a track on every other aircraft, :data:`TRACK_BYTES` each."""
-    n = len(sc.aircraft) + sc.traffic.count
-    trackers = sum(a.avoid or a.controlled for a in sc.aircraft)
-    if sc.traffic.pattern != "encounter":
-        trackers += sc.traffic.count
-    else:
-        trackers += sc.traffic.controlled
-    return trackers * max(n - 1, 0) * TRACK_BYTES
-
-
-def _check_memory(sc: Scenario) -> None:
-    """Refuse, before anything is allocated, a scenario whose worst-case track table would
-    not fit in :data:`MEMORY_FRACTION` of physical memory (``traffic.count = 10**9`` once
-    tried to allocate 15 GiB and died)."""
-    need = track_table_bytes(sc)
-    total = physical_memory_bytes()
-    if total is None or need <= MEMORY_FRACTION * total:
-        return
-    key = "traffic.count" if sc.traffic.count else "aircraft"
-    got = sc.traffic.count if sc.traffic.count else len(sc.aircraft)
-    raise Invalid(
-        key,
-        f"expected fewer aircraft: {len(sc.aircraft) + sc.traffic.count} aircraft may need "
-        f"{need / 2**30:.1f} GiB of tracks (every tracking aircraft tracking every other), "
-        f"more than {MEMORY_FRACTION:.0%} of this machine's {total / 2**30:.1f} GiB; got {got}",
-    )
 
 
 # --------------------------------------------------------------------------- part parameters

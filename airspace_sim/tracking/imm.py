@@ -47,10 +47,13 @@ Units are whatever the model uses; in this project SI (m, m/s, rad/s), state
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from airspace_sim.dynamics.markov import validate_transition_matrix
 from airspace_sim.errors import UserError
+from airspace_sim.resources import check_allocation
 from airspace_sim.tracking import _codegen, _kernels
 from airspace_sim.tracking.slots import Slots
 
@@ -323,6 +326,16 @@ class SlotIMM:
             return
         W, M, n = self._W, self.M, self.n
         C0, C = old // W, capacity // W
+        lanes_last = (self._xs, self._Ps, self._mus)
+        lanes_first = (self._x, self._P, self._mu, self._nis, self._ll, self._gated)
+        lane_bytes = sum(a.itemsize * math.prod(a.shape[1:]) // W for a in lanes_last) + sum(
+            a.itemsize * math.prod(a.shape[1:]) for a in lanes_first
+        )
+        check_allocation(  # old and new arrays live together while copying
+            f"track table: growing to {capacity} tracks",
+            (old + capacity) * lane_bytes,
+            "fewer aircraft in sensor range of each other (traffic.count, sensor.range)",
+        )
 
         def grown(a, fill, lanes_last):
             shape = ((C,) + a.shape[1:]) if lanes_last else ((capacity,) + a.shape[1:])
