@@ -70,7 +70,7 @@ def _start(cmd: list[str], parts: Path, tmp_path: Path, want_children: int):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM], ids=["SIGKILL", "SIGTERM"])
 def test_killed_parent_leaves_no_workers_and_resumes(tmp_path, pristine, sig):
     out = tmp_path / "k.parquet"
     parts = out.with_name(out.name + ".parts")

@@ -225,3 +225,16 @@ def test_ray_backend_without_ray_says_what_to_install(monkeypatch):
         make_backend("ray", 2)
     with pytest.raises(UserError, match="--backend"):
         make_backend("dask", 2)
+
+
+def test_grid_and_set_of_one_key_is_refused(tmp_path):
+    with pytest.raises(UserError, match="give it once"):
+        run_sweep(
+            "head_on",
+            ["aircraft[0].speed=200,210"],
+            "0",
+            tmp_path / "x.parquet",
+            ["aircraft[0].speed=220"],
+            steps=2,
+            progress=False,
+        )

@@ -288,8 +288,13 @@ def run_sweep(
     backend, address : ``"local"`` or ``"ray"``; a Ray cluster address.
     progress : tqdm bar on stderr.
     """
+    import numpy as np
+
     from airspace_sim.experiments import PartStore, Unit, execute, make_backend
+    from airspace_sim.scenarios import build_aircraft
     from airspace_sim.scenarios.loader import display_path, resolve
+    from airspace_sim.scenarios.overrides import format_key, parse_key
+    from airspace_sim.scenarios.overrides import parse as parse_override
 
     axes = [a if isinstance(a, Axis) else parse_axis(a) for a in grid]
     seed_list = parse_seeds(seeds) if isinstance(seeds, str) else [int(s) for s in seeds]
@@ -298,10 +303,8 @@ def run_sweep(
     if steps is not None and (not isinstance(steps, int) or steps < 1):
         raise UserError(f"--steps: must be a positive integer, got {steps!r}")
     base = list(overrides)
-    from airspace_sim.scenarios.overrides import parse as parse_override
-
-    base_keys = {".".join(map(str, parse_override(o)[0])) for o in base}
-    clash = [k for a in axes for k in a.keys if k in base_keys]
+    base_keys = {format_key(parse_override(o)[0]) for o in base}
+    clash = [k for a in axes for k in a.keys if format_key(parse_key(k)) in base_keys]
     if clash:
         raise UserError(f"--grid {clash[0]}: also given with --set; give it once")
     path = resolve(scenario)
@@ -312,10 +315,6 @@ def run_sweep(
         raise UserError(f"{source}: cannot read: {exc}") from None
     runs = plan(axes, seed_list)
     kinds = column_types(axes)
-    import numpy as np
-
-    from airspace_sim.scenarios import build_aircraft
-
     seen_cells = set()
     for r in runs:  # every cell valid before any work: errors come first, on one line
         if r.cell not in seen_cells:
