@@ -192,3 +192,19 @@ def test_predict_modes_at_uses_the_ekf_for_the_turn_mode():
             scaled_close(xs[0, 1, i], Ps[0, 1, i], ekf.x[:, 0], ekf.P)
     xs2, Ps2 = imm.predict_modes(10)
     np.testing.assert_allclose(xs2[0, 1, 9], xs[0, 1, 1], rtol=1e-12)
+
+
+def test_turn_presets_names_and_noise():
+    d = presets.get("dense-turns")
+    assert d.mode_names() == ("straight", "left 1°/s", "right 1°/s", "left 2°/s", "right 2°/s",
+                              "left 3°/s", "right 3°/s")  # fmt: skip
+    assert d.turning_modes().tolist() == [False] + [True] * 6
+    np.testing.assert_allclose(np.asarray(d.transition_matrix).sum(axis=1), 1.0)
+    assert "estimated_turn_rate" not in d.imm_arguments()  # linear: filterpy-compatible args
+    ct = presets.get("turn-rate", dt=4.0)
+    a = ct.imm_arguments()
+    assert a["estimated_turn_rate"].tolist() == [False, True] and a["dt"] == 4.0
+    assert a["process_noise"][1, 4, 4] == pytest.approx(ct.ct_sigma_turn_rate**2 * 4.0)
+    assert a["offsets"][1, 4] == 0.0 and a["transitions"][1, 4, 4] == 1.0
+    assert ct.turning_modes().tolist() == [False, True]
+    assert presets.get("seed").mode_names() == ("straight", "left 45°/s", "right 45°/s")
