@@ -618,6 +618,15 @@ class IMM:
         (default) generates unless the code would be slow to compile (over
         :data:`._codegen.AUTO_MAX_PRODUCTS` multiplications, e.g. dense 6-state models);
         the choice made is in the attribute ``kernel``.
+    estimated_turn_rate : (M,) bool, optional
+        Modes whose turn rate is the state's own Ω (n = 5, state ``[x, vx, y, vy, Ω]``):
+        an EKF coordinated turn (:mod:`.coordinated_turn`), for which ``transitions[j]`` is
+        not used; such a model runs the ``"loops"`` kernel.
+    dt : float, optional
+        The step in seconds; needed with estimated-rate modes.
+    mode_names : (M,) str, optional
+        Names of the modes (attribute ``mode_names``; default ``mode0``, ``mode1``, ...).
+        :meth:`from_preset` gives the preset's names and can step with any dt.
 
     Attributes
     ----------
