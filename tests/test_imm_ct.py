@@ -208,3 +208,18 @@ def test_turn_presets_names_and_noise():
     assert a["offsets"][1, 4] == 0.0 and a["transitions"][1, 4, 4] == 1.0
     assert ct.turning_modes().tolist() == [False, True]
     assert presets.get("seed").mode_names() == ("straight", "left 45°/s", "right 45°/s")
+
+
+def test_a_start_far_from_the_measurements_warns_once():
+    p = presets.get("realistic")
+    imm = IMM.from_preset(p, np.zeros((2, 5)), np.eye(5) * 1e4)
+    z = np.array([[50e3, 20e3], [0.0, 0.0]])
+    with pytest.warns(UserWarning, match="two_point_initialisation"):
+        for k in range(6):
+            imm.step(z + [[200.0 * k, 0.0], [0.0, 0.0]])
+    assert imm.gated[0] and not imm.gated[1]
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        imm.step(z)  # once only
