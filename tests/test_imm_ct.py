@@ -192,3 +192,34 @@ def test_predict_modes_at_uses_the_ekf_for_the_turn_mode():
             scaled_close(xs[0, 1, i], Ps[0, 1, i], ekf.x[:, 0], ekf.P)
     xs2, Ps2 = imm.predict_modes(10)
     np.testing.assert_allclose(xs2[0, 1, 9], xs[0, 1, 1], rtol=1e-12)
+
+
+def test_turn_presets_names_and_noise():
+    d = presets.get("dense-turns")
+    assert d.mode_names() == ("straight", "left 1°/s", "right 1°/s", "left 2°/s", "right 2°/s",
+                              "left 3°/s", "right 3°/s")  # fmt: skip
+    assert d.turning_modes().tolist() == [False] + [True] * 6
+    np.testing.assert_allclose(np.asarray(d.transition_matrix).sum(axis=1), 1.0)
+    assert "estimated_turn_rate" not in d.imm_arguments()  # linear: filterpy-compatible args
+    ct = presets.get("turn-rate", dt=4.0)
+    a = ct.imm_arguments()
+    assert a["estimated_turn_rate"].tolist() == [False, True] and a["dt"] == 4.0
+    assert a["process_noise"][1, 4, 4] == pytest.approx(ct.ct_sigma_turn_rate**2 * 4.0)
+    assert a["offsets"][1, 4] == 0.0 and a["transitions"][1, 4, 4] == 1.0
+    assert ct.turning_modes().tolist() == [False, True]
+    assert presets.get("seed").mode_names() == ("straight", "left 45°/s", "right 45°/s")
+
+
+def test_a_start_far_from_the_measurements_warns_once():
+    p = presets.get("realistic")
+    imm = IMM.from_preset(p, np.zeros((2, 5)), np.eye(5) * 1e4)
+    z = np.array([[50e3, 20e3], [0.0, 0.0]])
+    with pytest.warns(UserWarning, match="two_point_initialisation"):
+        for k in range(6):
+            imm.step(z + [[200.0 * k, 0.0], [0.0, 0.0]])
+    assert imm.gated[0] and not imm.gated[1]
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        imm.step(z)  # once only

@@ -88,3 +88,34 @@ def test_no_long_segment_is_a_user_error():
 
     with pytest.raises(UserError, match="no flight segment"):
         evaluation.evaluate([], presets.get("realistic"), 50.0, 1.0)
+
+
+def test_evaluate_tracker_command_on_a_recorded_file(tmp_path, capsys):
+    """The CLI end to end on a traffic-style CSV made here (needs the recorded readers)."""
+    pytest.importorskip("airspace_sim.recorded")
+    pd = pytest.importorskip("pandas")
+    pyproj = pytest.importorskip("pyproj")
+    from airspace_sim import cli
+
+    t, X = flight(LEGS)
+    rec = np.arange(0, t.size, 5)
+    to_geo = pyproj.Transformer.from_crs(
+        pyproj.CRS.from_proj4("+proj=aeqd +lat_0=47 +lon_0=8 +datum=WGS84 +units=m"),
+        "EPSG:4326", always_xy=True,
+    )  # fmt: skip
+    lon, lat = to_geo.transform(X[rec, 0], X[rec, 2])
+    track = (90.0 - np.degrees(np.arctan2(X[rec, 3], X[rec, 1]))) % 360.0
+    pd.DataFrame({
+        "timestamp": pd.Timestamp("2024-01-01T10:00:00Z") + pd.to_timedelta(t[rec], unit="s"),
+        "icao24": "abc123", "callsign": "TEST1", "latitude": lat, "longitude": lon,
+        "altitude": 30000.0, "groundspeed": np.hypot(X[rec, 1], X[rec, 3]) / 0.514444,
+        "track": track,
+    }).to_csv(tmp_path / "f.csv", index=False)  # fmt: skip
+    out = tmp_path / "r.json"
+    assert cli.main(["evaluate-tracker", str(tmp_path / "f.csv"), "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "sigma=50 m, period=1 s, preset=realistic" in text and "sigma=100 m, period=4 s" in text
+    import json
+
+    rows = json.loads(out.read_text())
+    assert [r["period_s"] for r in rows] == [1.0, 4.0] and all(r["n_flights"] == 1 for r in rows)

@@ -2,8 +2,8 @@
 
 The paper's future work (§VII) asks how the IMM does on real flight data. Here a recorded
 trajectory is the truth: it is resampled to the surveillance period (:func:`resample`: the
-recorded positions smoothed over half a minute), position measurements with σ-white noise are drawn from it, and the trackers
-are run on them:
+recorded positions re-timed and smoothed over half a minute), position measurements with
+σ-white noise are drawn from it, and the trackers are run on them:
 
 - the IMM of a :class:`~airspace_sim.dynamics.presets.Preset` (``imm_arguments``, R = σ² I),
   started from the first two measurements (:func:`two_point_initialisation`);
@@ -17,7 +17,8 @@ average NIS against its χ²(2) band, and how often the IMM flags a turn. A seco
 probability of its turning modes exceeds one half, and the flag has the right sign when its
 turn-rate estimate has the sign of the truth's. A second flag, for any tracker with Ω in
 its state, is the combined estimate ``|Ω̂| ≥`` :data:`RATE_FLAG_DEG_S` (an estimated-rate
-mode also fits straight flight, with Ω̂ ≈ 0, so its probability alone says less). Turn rates are counter-clockwise positive.
+mode also fits straight flight, with Ω̂ ≈ 0, so its probability alone says less). Turn
+rates are counter-clockwise positive.
 
 Flights are given as arrays (times in seconds, east/north positions in metres in a local
 frame), so any reader can feed this module; the ``evaluate-tracker`` command reads files.
@@ -196,7 +197,7 @@ class Evaluation:
         ]
 
 
-def _stack(truths, period_s):
+def _stack(truths):
     """Flights side by side from their first sample: (T, F, 5) truth, NaN after the end."""
     T = max(tr.t_s.size for tr in truths)
     X = np.full((T, len(truths), models.N_STATE), np.nan)
@@ -236,7 +237,7 @@ def evaluate(
     if not truths:
         raise UserError("evaluate-tracker: no flight segment long enough to evaluate")
     p = preset.with_(dt=period_s, measurement_sigma=sigma_m)
-    X = _stack(truths, period_s)
+    X = _stack(truths)
     T, F, _ = X.shape
     rng = np.random.default_rng(seed)
     Z = X[..., [0, 2]] + sigma_m * rng.standard_normal((T, F, 2))  # NaN after each flight

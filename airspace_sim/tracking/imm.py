@@ -62,6 +62,10 @@ from airspace_sim.tracking.slots import Slots
 #: about once per million updates, a 10-sigma outlier always.
 DEFAULT_GATE_PROBABILITY = 1.0 - 1e-6
 
+#: :class:`IMM` warns when a tracker has rejected this many measurements since it started
+#: and accepted none (a start far from the target, e.g. x0 = 0 for an aircraft 50 km away).
+GATED_START_WARNING = 5
+
 
 def gate_threshold(gate_probability: float, m: int = 2) -> float:
     """The gate on d² = νᵀ S⁻¹ ν for ``gate_probability`` and ``m`` measurement components:
@@ -631,6 +635,15 @@ class IMM:
         (default) generates unless the code would be slow to compile (over
         :data:`._codegen.AUTO_MAX_PRODUCTS` multiplications, e.g. dense 6-state models);
         the choice made is in the attribute ``kernel``.
+    estimated_turn_rate : (M,) bool, optional
+        Modes whose turn rate is the state's own Ω (n = 5, state ``[x, vx, y, vy, Ω]``):
+        an EKF coordinated turn (:mod:`.coordinated_turn`), for which ``transitions[j]`` is
+        not used; such a model runs the ``"loops"`` kernel.
+    dt : float, optional
+        The step in seconds; needed with estimated-rate modes.
+    mode_names : (M,) str, optional
+        Names of the modes (attribute ``mode_names``; default ``mode0``, ``mode1``, ...).
+        :meth:`from_preset` gives the preset's names and can step with any dt.
 
     Attributes
     ----------
@@ -691,6 +704,9 @@ class IMM:
         self._identity = True  # rows == arange(B): dense arrays are slices of the slots'
         self._cache: dict = {}
         self._z = np.zeros((0, s.m))
+        # per tracker: measurements gated since it started, while it has accepted none
+        self._gated_from_start = np.zeros(self.B, dtype=np.int64)
+        self._warned = False
 
     @classmethod
     def from_preset(cls, preset, x0, P0, mu0=None, **kwargs) -> IMM:
@@ -804,6 +820,26 @@ class IMM:
             self._z[self._rows] = z
         s.step(self._z, dt)
         self._cache.clear()
+        self._check_start(z)
+
+    def _check_start(self, z) -> None:
+        """Warn (once) when trackers have rejected every measurement since they started:
+        their x0 / P0 are far from the measurements and they will never pick the target up."""
+        have = np.all(np.isfinite(z), axis=1)
+        g = self._gated_from_start
+        g[:] = np.where(have & (g >= 0), np.where(self.gated, g + 1, -1), g)
+        if not self._warned and np.any(g >= GATED_START_WARNING):
+            import warnings
+
+            self._warned = True
+            bad = np.flatnonzero(g >= GATED_START_WARNING)
+            warnings.warn(
+                f"IMM: {bad.size} tracker(s) (first: row {bad[0]}) have rejected all of their "
+                f"first {GATED_START_WARNING} measurements (gate d² > {self.gate_threshold:.3g}):"
+                " their x0 / P0 are far from the measurements; start them with "
+                "airspace_sim.tracking.two_point_initialisation",
+                stacklevel=3,
+            )
 
     def append(self, x0, P0, mu0) -> np.ndarray:
         """Add trackers at the end of the batch; return their row indices (k,) int.
@@ -817,6 +853,9 @@ class IMM:
         slots = self._s._birth_valid(x0, P0, mu0)
         self._identity = self._identity and bool(np.all(slots == np.arange(B, B + slots.size)))
         self._rows = np.concatenate([self._rows, slots])
+        self._gated_from_start = np.concatenate(
+            [self._gated_from_start, np.zeros(slots.size, dtype=np.int64)]
+        )
         self._cache.clear()
         return np.arange(B, B + slots.size)
 
@@ -842,6 +881,7 @@ class IMM:
         keep[idx] = False
         self._s.drop(self._rows[~keep])
         self._rows = self._rows[keep]
+        self._gated_from_start = self._gated_from_start[keep]
         self._identity = bool(np.all(self._rows == np.arange(self._rows.size)))
         self._cache.clear()
 
