@@ -330,10 +330,10 @@ class SlotIMM:
             return
         W, M, n = self._W, self.M, self.n
         C0, C = old // W, capacity // W
-        lanes_last = (self._xs, self._Ps, self._mus)
-        lanes_first = (self._x, self._P, self._mu, self._nis, self._ll, self._gated)
-        lane_bytes = sum(a.itemsize * math.prod(a.shape[1:]) // W for a in lanes_last) + sum(
-            a.itemsize * math.prod(a.shape[1:]) for a in lanes_first
+        soa = (self._xs, self._Ps, self._mus)  # (C, ..., W): W lanes per chunk
+        rows = (self._x, self._P, self._mu, self._nis, self._ll, self._gated)  # (capacity, ...)
+        lane_bytes = sum(a.itemsize * math.prod(a.shape[1:]) // W for a in soa) + sum(
+            a.itemsize * math.prod(a.shape[1:]) for a in rows
         )
         check_allocation(  # old and new arrays live together while copying
             f"track table: growing to {capacity} tracks",
