@@ -282,3 +282,17 @@ def test_cli_replay_bad_file_is_one_line(tmp_path, capsys):
     assert code == 2
     assert stderr.strip().count("\n") == 0
     assert "bad.csv: row 1 (line 2), column 'latitude'" in stderr
+
+
+def test_a_pickled_replay_world_continues_bit_for_bit():
+    import pickle
+
+    a, b = _crossing()
+    w = _world([a, b], duration=200.0)
+    for _ in range(15):  # B not in yet
+        w.step()
+    copy = pickle.loads(pickle.dumps(w))
+    _run(w)
+    _run(copy)
+    assert np.array_equal(w.positions, copy.positions)
+    assert json.dumps(w.metrics()) == json.dumps(copy.metrics())

@@ -196,7 +196,7 @@ def run(args) -> int:
         leave=False,
     )
     interrupted = False
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     try:
         for k in range(steps):
             world.step()
@@ -209,6 +209,8 @@ def run(args) -> int:
     finally:
         bar.close()
     wall = time.perf_counter() - t0
+    cpu = time.process_time() - cpu0  # this process's CPU s: on a shared machine wall
+    # time also counts the waits for a core
     video_path = frames.close() if frames is not None else None
     summary = {
         "scenario": sc.name,
@@ -224,6 +226,8 @@ def run(args) -> int:
         "build_time": round(build_s, 3),
         "steps_per_second": round(world.step_count / wall, 1) if wall > 0 else None,
         "real_time_factor": round(world.time / wall, 1) if wall > 0 else None,
+        "cpu_time": round(cpu, 3),
+        "real_time_factor_cpu": round(world.time / cpu, 1) if cpu > 0 else None,
         "interrupted": interrupted,
         "replay": jsonable(stats.report()),
         "metrics": jsonable(world.metrics()),

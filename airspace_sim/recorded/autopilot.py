@@ -4,8 +4,9 @@ Each member carries a :class:`Recording` (``AircraftSpec.recording``: a
 :class:`~airspace_sim.recorded.flights.Flight` and the flight time at world time 0). The
 autopilot is kinematic (:attr:`airspace_sim.parts.Autopilot.kinematic`): at every world
 step it gives each member the velocity that takes its body from where it is to the
-recording's position one step later (cubic Hermite between samples, as :meth:`Flight.sample`), so the pymunk bodies follow the data to
-rounding and collide, are surveyed and tracked like any other aircraft. A member is in the
+recording's position one step later (cubic Hermite between samples, as
+:meth:`Flight.sample`), so the pymunk bodies follow the data to rounding and collide, are
+surveyed and tracked like any other aircraft. A member is in the
 world from the first step at or after its first sample to the last step at or before its
 last one, and out of it during gaps longer than the flight's ``max_gap_s``. No resolver or
 agent steers it.

@@ -17,6 +17,8 @@ earlier one and no part calls back into the world (``docs/dataflow.md``):
    (velocity ``v·sinc(ωdt/2)`` at heading ``h + ωdt/2``), integrated by pymunk
    (:mod:`.bodies`), whose collision handlers keep the pairs in loss of separation, NMAC and
    sensor range; route aircraft past their last waypoint leave (``active`` False);
+   aircraft of kinematic autopilots (recorded traffic, :mod:`airspace_sim.recorded`) fly
+   the autopilot's velocity instead and come and go as its ``presence`` says;
 3. surveillance: at scan steps every tracking ownship (avoiding or RL) measures the
    intruders in range (:mod:`.sensors`, world-frame positions with noise σ);
 4. tracking: the track table (:mod:`.trackers`) steps every (ownship, intruder) filter,
