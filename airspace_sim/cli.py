@@ -60,7 +60,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # a one-line usage error (2), or --help / --version (0)
+        return exc.code if isinstance(exc.code, int) else 0
     if not getattr(args, "_run", None):
         parser.print_help()
         return 0

@@ -83,7 +83,7 @@ def test_world_campaign_rows_and_summary(tmp_path):
         (["--frame", "sideways"], "--frame"),
         (["--seed", "-1"], "--seed"),
         (["--seed", str(2**70)], "--seed"),
-        (["--summary-md", "/nonexistent/folder/s.md"], "--summary-md"),
+        (["--summary-md", "/dev/null/folder/s.md"], "--summary-md"),  # a file in the path
         (["--address", "127.0.0.1:6379"], "--address: only with --backend ray"),
     ],
 )

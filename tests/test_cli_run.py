@@ -107,7 +107,7 @@ BAD_FILES = {
     "wrong_type.toml": ('name = "x"\n[traffic]\ncount = "many"\n', ["traffic.count", "'many'"]),
     "out_of_range.toml": (
         'name = "x"\n[traffic]\ncount = -3\n',
-        ["traffic.count: expected a non-negative integer up to 10000, got -3"],
+        ["traffic.count: expected a non-negative integer up to 100000, got -3"],
     ),
     "malformed.toml": ('name = "x"\n[traffic\ncount = 3\n', ["invalid TOML at line 2, column"]),
 }

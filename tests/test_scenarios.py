@@ -272,11 +272,11 @@ def test_override_list_index_and_list_value():
     [
         (
             "traffic.count=abc",
-            "--set traffic.count: expected a non-negative integer up to 10000, got 'abc'",
+            "--set traffic.count: expected a non-negative integer up to 100000, got 'abc'",
         ),
         (
             "traffic.count=-3",
-            "--set traffic.count: expected a non-negative integer up to 10000, got -3",
+            "--set traffic.count: expected a non-negative integer up to 100000, got -3",
         ),
         ("traffic.cout=3", "--set traffic.cout: unknown key"),
         ("trafic.count=3", "--set trafic: unknown key"),
@@ -529,7 +529,7 @@ def _with(path: str, value):
         ("resolver.params.bogus", 1, "resolver.params.bogus: unknown key, got 1 (known: r_safe,"),
         ("resolver.params.left_penalty", "x", "resolver.params.left_penalty: expected a number"),
         ("resolver.params.resolution", -1.0, "resolver.params.resolution: expected a number in"),
-        ("traffic.count", 10**9, "traffic.count: expected a non-negative integer up to 10000"),
+        ("traffic.count", 10**9, "traffic.count: expected a non-negative integer up to 100000"),
         ("traffic.sector", 1e308, "traffic.sector: expected a positive number up to"),
     ],
 )
