@@ -31,6 +31,8 @@ class ReciprocalBandsResolver(BandsResolver):
             0.5, doc="fraction of the avoidance this ownship takes (1: bands)", gt=0, le=1
         )
 
-    def _search(self, vo, r, v, valid, mx, r_safe, turn_rate=None):
+    def _search(self, vo, r, v, valid, mx, r_safe, turn_rate=None, committed_side=None):
         # the ownship's velocity scaled by 1/share, relative velocities as tracked
-        return super()._search(vo / self.params.share, r, v, valid, mx, r_safe, turn_rate)
+        return super()._search(
+            vo / self.params.share, r, v, valid, mx, r_safe, turn_rate, committed_side
+        )
