@@ -271,7 +271,7 @@ def test_busy_random_traffic_pairs_and_begin_events_equal_brute_force(spatial_ha
     # end, and several LoS / NMAC pairs. Oracle: brute-force distances; the begun pairs of
     # a step are exactly the brute-force pairs that were not there the step before, the
     # ended ones those that were there and are not now (pair sets equal every step). The
-    # candidates are found again every step (margin 0), every third step (default) or
+    # candidates are found again every step (margin 0), every fifth step (default) or
     # every 17 steps (15 km).
     n, side = 300, 95000.0
     radii = {LOS: 3000.0, NMAC: 1000.0, RANGE: 20000.0}
@@ -303,7 +303,7 @@ def test_busy_random_traffic_pairs_and_begin_events_equal_brute_force(spatial_ha
     assert min(began_total[t] for t in SETS) > 0 and min(ended_total[t] for t in SETS) > 0
     # the airspace's positions are the ones handed out; the candidates were found again
     assert sp.positions[sp.in_space].tobytes() == pos[sp.in_space].tobytes()
-    expected_refreshes = {None: 20, 0.0: 60, 15000.0: 3}[margin]
+    expected_refreshes = {None: 12, 0.0: 60, 15000.0: 3}[margin]
     assert sp.refreshes == expected_refreshes
     assert began_total[RANGE] > 500 and ended_total[RANGE] > 500
 

@@ -182,9 +182,11 @@ def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - comp
     The entries of finite ``mag`` form three runs already sorted by that key — the grid's
     right turns by decreasing index, its left turns by increasing index (``grid`` increasing),
     and the limits and extras after a stable sort of ``mag`` (listed right turns first,
-    each in index order) — which are merged. The ``inf`` and then NaN ``mag`` entries follow
-    in that listing order, which is where the lexsort puts them. Returns the sorted rows
-    (n_own, C) and the grid index of each entry (−1: not from the grid).
+    each in index order) — which are merged. The grid's two runs are merged once for the
+    whole grid; a row keeps the entries inside its limit, in that order. The ``inf`` and
+    then NaN ``mag`` entries follow in the listing order, which is where the lexsort puts
+    them (every NaN here is the same ``np.nan``). Returns the sorted rows (n_own, C) and
+    the grid index of each entry (−1: not from the grid).
     """
     n_own, n_extra = extra.shape
     n_grid = grid.size
@@ -207,42 +209,51 @@ def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - comp
     ov, om, ol, oi = rv.copy(), rm.copy(), rl.copy(), ri.copy()
     tail = np.empty((4, n_cand))
     nt = np.zeros(4, np.int64)  # tail counts: (inf, right), (inf, left), (NaN, right), ...
+    # the whole grid's order: its right turns by decreasing index merged with its left
+    # turns by increasing index
+    nr = 0
+    for j in range(split - 1, -1, -1):
+        rv[nr], rm[nr], rl[nr], ri[nr] = grid[j], abs(grid[j]), False, j
+        nr += 1
+    nl = 0
+    for j in range(split, n_grid):
+        lv[nl], lm[nl], ll[nl], li[nl] = grid[j], abs(grid[j]) + left_penalty, True, j
+        nl += 1
+    n_all = _merge(rv, rm, rl, ri, nr, lv, lm, ll, li, nl, ov, om, ol, oi, 0)
+    all_v, all_m, all_l, all_i = (
+        ov[:n_all].copy(),
+        om[:n_all].copy(),
+        ol[:n_all].copy(),
+        oi[:n_all].copy(),
+    )
     for n in range(n_own):
         lim = mx[n] * (1 + 1e-12) + 1e-15
-        for j in range(n_cand):
-            if j < n_grid:
-                c = grid[j]
-            elif j == n_grid:
+        for j in range(n_grid, n_cand):
+            if j == n_grid:
                 c = -mx[n]
             elif j == n_grid + 1:
                 c = mx[n]
             else:
                 c = extra[n, j - n_grid - 2]
             row[j] = c if abs(c) <= lim else np.nan
-        nr = 0
-        for j in range(split - 1, -1, -1):
-            g = abs(row[j])
-            if g < np.inf:
-                rv[nr], rm[nr], rl[nr], ri[nr] = row[j], g, False, j
-                nr += 1
-        nl = 0
-        for j in range(split, n_grid):
-            g = abs(row[j]) + left_penalty
-            if g < np.inf:
-                lv[nl], lm[nl], ll[nl], li[nl] = row[j], g, True, j
-                nl += 1
-        ng = _merge(rv, rm, rl, ri, nr, lv, lm, ll, li, nl, gv, gm, gl, gi, 0)
+        # the grid entries inside the limit, in the grid's order; the others are NaN
+        ng = 0
+        for q in range(n_all):
+            if abs(all_v[q]) <= lim:
+                gv[ng], gm[ng], gl[ng], gi[ng] = all_v[q], all_m[q], all_l[q], all_i[q]
+                ng += 1
         # limits and extras of finite mag listed right turns first, then a stable insertion
         # sort by mag (a few dozen per row); the rest into the inf / NaN tail lists
         nx = nxl = 0
         nt[:] = 0
-        for j in range(n_cand):
+        for q in range(n_all - ng):
+            tail[2, q] = np.nan
+        nt[2] = n_all - ng
+        for j in range(n_grid, n_cand):
             c = row[j]
             left = c > 0.0
             g = np.inf if np.isnan(c) else abs(c) + (left_penalty if left else 0.0)
             if g < np.inf:
-                if j < n_grid:
-                    continue
                 if left:
                     lv[nxl], lm[nxl], li[nxl] = c, g, j
                     nxl += 1

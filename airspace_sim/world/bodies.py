@@ -27,8 +27,10 @@ of its sorted keys with the previous step's.
 
 Positions are integrated here as chipmunk integrates a kinematic body (``p ← p + v·dt``,
 the same bits). Cost per step: O(N + candidates) in numba and numpy, plus pymunk's
-broad phase and arbiters once every ``margin / (2·v_max·dt)`` steps (every 8 steps at the
-benchmark's 40 km range and 230 m/s: margin = 10% of ``R``).
+broad phase and arbiters once every ``margin / (2·v_max·dt)`` steps (every 18 steps at the
+benchmark's 40 km range and 230 m/s: margin = 20% of ``R``; 1.44 times the pairs in range
+as candidates; on the 1000-aircraft benchmark traffic 3.0 ms CPU per step against 4.3 with
+a 10% margin refreshed every 8 steps, ``docs/performance.md``).
 
 Everything lives on the instance: several worlds in one process never share state.
 """
@@ -46,7 +48,7 @@ LOS, NMAC, RANGE = 1, 2, 3
 SETS = (LOS, NMAC, RANGE)
 _ARBITER_BODIES = pymunk.batch.ArbiterFields.BODY_A_ID | pymunk.batch.ArbiterFields.BODY_B_ID
 #: refresh margin as a fraction of the largest pair distance
-MARGIN_FRACTION = 0.1
+MARGIN_FRACTION = 0.2
 #: the distance flown is compared with the margin less this fraction (float rounding)
 _MARGIN_SLACK = 1e-6
 
@@ -69,30 +71,27 @@ def _delete_sorted(keys: np.ndarray, gone: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _exact_pairs(keys, n, positions, d2_los, d2_nmac, d2_range):  # pragma: no cover
+def _exact_pairs(keys, n, positions, d2):  # pragma: no cover - compiled
     """The candidate ``keys`` (P,) sorted, ``i·n + j``, whose centres (``positions`` (N, 2) m)
-    are closer than each set's distance (squared, m²): ``(los, nmac, range)`` sorted keys.
-    ``dx² + dy² < d²`` as chipmunk's circle test computes it."""
-    los = np.empty(keys.size, dtype=np.int64)
-    nmac = np.empty(keys.size, dtype=np.int64)
-    rng = np.empty(keys.size, dtype=np.int64)
-    a = b = c = 0
+    are closer than each set's distance ``d2`` (3,) squared, m²: per set ``(keys, i, j)``
+    (sorted keys and their aircraft), in the order of ``d2``. ``dx² + dy² < d²`` as
+    chipmunk's circle test computes it."""
+    out_k = np.empty((3, keys.size), dtype=np.int64)
+    out_i = np.empty((3, keys.size), dtype=np.int64)
+    out_j = np.empty((3, keys.size), dtype=np.int64)
+    count = np.zeros(3, dtype=np.int64)
     for p in range(keys.size):
         i = keys[p] // n
-        j = keys[p] % n
+        j = keys[p] - i * n
         dx = positions[j, 0] - positions[i, 0]
         dy = positions[j, 1] - positions[i, 1]
-        d2 = dx * dx + dy * dy
-        if d2 < d2_los:
-            los[a] = keys[p]
-            a += 1
-        if d2 < d2_nmac:
-            nmac[b] = keys[p]
-            b += 1
-        if d2 < d2_range:
-            rng[c] = keys[p]
-            c += 1
-    return los[:a], nmac[:b], rng[:c]
+        dd = dx * dx + dy * dy
+        for t in range(3):
+            if dd < d2[t]:
+                c = count[t]
+                out_k[t, c], out_i[t, c], out_j[t, c] = keys[p], i, j
+                count[t] = c + 1
+    return [(out_k[t, : count[t]], out_i[t, : count[t]], out_j[t, : count[t]]) for t in range(3)]
 
 
 @njit(cache=True)
@@ -120,7 +119,7 @@ class Airspace:
     r_safe, nmac, sensor_range : the three distances of the table above, m.
     spatial_hash : index the space with pymunk's spatial hash (cell size ``R + margin``,
         4·N cells) instead of the default bounding-box tree; the same pairs either way.
-    margin : m, the candidate circles' extra diameter (default 10% of ``R``); a larger
+    margin : m, the candidate circles' extra diameter (default :data:`MARGIN_FRACTION` of ``R``); a larger
         margin means more candidates and rarer refreshes, never other pairs.
     in_space : (N,) bool, optional: the aircraft that start in the space (default all; the
         others can come in later with :meth:`add`).
@@ -235,23 +234,23 @@ class Airspace:
     def _update_sets(self, reset_began: bool = True) -> None:
         """The three exact sets from the candidates at :attr:`positions`; :attr:`began`
         their new keys (added to it unless ``reset_began``)."""
-        d = self.distances
-        sets = _exact_pairs(
-            self._candidates,
-            max(self.n, 1),
-            self.positions,
-            d[LOS] * d[LOS],
-            d[NMAC] * d[NMAC],
-            d[RANGE] * d[RANGE],
-        )
+        sets = self._exact(self._candidates)
         n = max(self.n, 1)
         began = {}
-        for t, keys in zip(SETS, sets):
+        self._ij = {}
+        for t, (keys, i, j) in zip(SETS, sets):
             new = _new_keys(keys, self.pairs[t])
             b = np.stack([new // n, new % n], axis=1)
             began[t] = b if reset_began else np.concatenate([self.began[t], b])
             self.pairs[t] = keys
+            self._ij[t] = (i, j)
         self.began = began
+
+    def _exact(self, candidates: np.ndarray) -> list:
+        """Per set (in :data:`SETS` order) ``(keys, i, j)`` of the ``candidates`` closer
+        than its distance at :attr:`positions`."""
+        d2 = np.array([self.distances[t] ** 2 for t in SETS])
+        return _exact_pairs(candidates, max(self.n, 1), self.positions, d2)
 
     # ----------------------------------------------------------------- public
     def set_velocities(self, velocities: np.ndarray) -> None:
@@ -303,10 +302,9 @@ class Airspace:
         self._flown = math.inf  # the new bodies' candidates are unknown until a refresh
 
     def pair_arrays(self, kind: int) -> tuple[np.ndarray, np.ndarray]:
-        """Current pairs of a set as (i, j) int64 arrays, i < j, sorted."""
-        k = self.pairs[kind]
-        n = max(self.n, 1)
-        return k // n, k % n
+        """Current pairs of a set as (i, j) int64 arrays, i < j, sorted (read-only: the
+        airspace's own, valid until its next step or removal)."""
+        return self._ij[kind]
 
     # --------------------------------------------------------------- pickling
     def __getstate__(self) -> dict:
@@ -354,10 +352,11 @@ class Airspace:
         self._check("candidates", self._candidates, stored)
         self.pairs = {t: np.array(k, dtype=np.int64) for t, k in state["pairs"].items()}
         self.began = {t: np.array(b, dtype=np.int64) for t, b in state["began"].items()}
-        d = self.distances
-        found = _exact_pairs(stored, max(self.n, 1), self.positions, *(d[t] * d[t] for t in SETS))
-        for t, keys in zip(SETS, found):
+        found = self._exact(stored)
+        self._ij = {}
+        for t, (keys, i, j) in zip(SETS, found):
             self._check(f"set {t}", keys, self.pairs[t])
+            self._ij[t] = (i, j)
 
     @staticmethod
     def _check(what: str, found: np.ndarray, stored: np.ndarray) -> None:

@@ -1,7 +1,7 @@
 """Surveillance sensors: which intruders an ownship measures this scan, and how noisily.
 
-*Who is in range* comes from the pymunk space (:mod:`.bodies`, RANGE circles of radius
-``range/2``: two overlap exactly when the aircraft are closer than ``range``); a sensor
+*Who is in range* comes from the airspace (:mod:`.bodies`: pymunk's candidate pairs, then
+the exact test "closer than ``range``" every step); a sensor
 only decides, for each (owner, intruder) pair in range, whether it is detected on this scan
 and what it reports. Registered as ``"radar"``, a class fitting :class:`airspace_sim.parts.Sensor` (constructed
 as ``cls(spec, dt, params)``; methods, shapes and units there). Its settings are validated
