@@ -14,9 +14,11 @@ earlier one and no part calls back into the world (``docs/dataflow.md``):
    back to the route is not clear), then the RL agents' finite ``heading_rate``; each turn
    rate clipped to the aircraft's ``max_turn_rate``;
 2. motion: constant speed, heading ``h → h + ω·dt``; the body flies the chord of that arc
-   (velocity ``v·sinc(ωdt/2)`` at heading ``h + ωdt/2``), integrated by pymunk
-   (:mod:`.bodies`), whose collision handlers keep the pairs in loss of separation, NMAC and
-   sensor range; route aircraft past their last waypoint leave (``active`` False);
+   (velocity ``v·sinc(ωdt/2)`` at heading ``h + ωdt/2``), integrated as chipmunk does
+   (``p + v·dt``) by the airspace (:mod:`.bodies`): pymunk's sensor circles (the largest
+   distance plus a margin) give candidate pairs, found again when an aircraft may have
+   flown half the margin, and an exact numba pass over them the pairs in loss of
+   separation, NMAC and sensor range; route aircraft past their last waypoint leave (``active`` False);
    aircraft of kinematic autopilots (recorded traffic, :mod:`airspace_sim.recorded`) fly
    the autopilot's velocity instead and come and go as its ``presence`` says;
 3. surveillance: at scan steps every tracking ownship (avoiding or RL) measures the
@@ -303,7 +305,7 @@ class World:
         return np.concatenate(arrive), np.concatenate(leave)
 
     def _update_contact_flags(self) -> None:
-        """``in_los`` and ``nmac`` (N,) from the pymunk pair sets."""
+        """``in_los`` and ``nmac`` (N,) from the airspace's pair sets."""
         for kind, flag in ((LOS, self.in_los), (NMAC, self.nmac)):
             i, j = self.airspace.pair_arrays(kind)
             flag[:] = False
@@ -389,7 +391,7 @@ class World:
         return self.metrics()
 
     def retire(self, indices) -> None:
-        """Take aircraft out of play now (``active`` False, out of the pymunk spaces): the
+        """Take aircraft out of play now (``active`` False, out of the pymunk space): the
         env's ``ended="leave"`` for agents whose episode ended. indices : (k,) int."""
         idx = np.asarray(indices, dtype=np.int64).reshape(-1)
         idx = idx[self.active[idx]]
