@@ -25,3 +25,22 @@ def pids_where(pred) -> list[int]:
             if pred(stat, cmd):
                 out.append(int(d.name))
     return out
+
+
+def parent_pid(pid: int) -> int:
+    """The parent of ``pid`` (0 if it is gone); ``/proc/<pid>/stat``'s 4th field, read after
+    the command name, which may hold spaces."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return 0
+    return int(stat.rsplit(")", 1)[1].split()[1])
+
+
+def descends_from(pid: int, root: int) -> bool:
+    """Is ``root`` an ancestor of ``pid``?"""
+    while pid > 1:
+        pid = parent_pid(pid)
+        if pid == root:
+            return True
+    return False

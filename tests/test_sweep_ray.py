@@ -9,7 +9,7 @@ import pytest
 
 ray = pytest.importorskip("ray")
 
-from _tables import pids_where, same_rows  # noqa: E402
+from _tables import descends_from, pids_where, same_rows  # noqa: E402
 
 from airspace_sim.encounters.campaign import run_campaign  # noqa: E402
 from airspace_sim.experiments.sweep import run_sweep  # noqa: E402
@@ -41,8 +41,12 @@ def test_encounters_on_ray_equal_local(tmp_path, local_ray):
 
 
 def _task_pids(name: str) -> list[int]:
-    """Pids of Ray workers running task ``name`` (their title is ``ray::<name>``)."""
-    return pids_where(lambda stat, cmd: cmd.startswith(f"ray::{name}".encode()))
+    """Pids of this test's own Ray workers running task ``name`` (their title is
+    ``ray::<name>``; the local Ray this process started is their ancestor, so another job's
+    Ray workers on the same machine are never touched)."""
+    me = os.getpid()
+    found = pids_where(lambda stat, cmd: cmd.startswith(f"ray::{name}".encode()))
+    return [pid for pid in found if descends_from(pid, me)]
 
 
 def test_lost_worker_is_retried_without_duplicates(tmp_path, local_ray):

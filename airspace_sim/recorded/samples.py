@@ -11,8 +11,9 @@ user has them: an installed ``traffic`` package, or the wheel itself (read as a 
     pip download traffic==2.8.1 --no-deps -d DIR
 
 and found through the ``AIRSPACE_SIM_TRAFFIC_WHEEL`` environment variable (the wheel file or
-its directory), ``wheel=`` arguments, or in ``~/.cache/airspace_sim/``. :func:`path` extracts a sample to a cache directory
-(``AIRSPACE_SIM_CACHE``, default ``~/.cache/airspace_sim/traffic-samples``) and returns it,
+its directory), ``wheel=`` arguments, or in ``~/.cache/airspace_sim/``. :func:`path`
+extracts a sample to a cache directory (``traffic-2.8.1-samples`` under
+``AIRSPACE_SIM_CACHE``, default ``~/.cache/airspace_sim``) and returns it,
 so that :func:`airspace_sim.recorded.read` and the CLI read it like any file.
 
     from airspace_sim.recorded import read, samples
