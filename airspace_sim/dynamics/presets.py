@@ -356,11 +356,8 @@ def dense_turns(dt: float = 1.0) -> Preset:
 def turn_rate(dt: float = 1.0) -> Preset:
     """Two filter modes: straight flight (CV, Ω pinned at 0) and a coordinated turn at the
     estimated rate Ω (EKF), Ω a random walk of 1 °/s per √s; σ_a = 1.5 m/s² in the filter;
-    mean sojourn 120 s straight, 30 s turning.
-
-    Tuned on the traffic calibration samples (``docs/tracking.md``: σ_Ω 0.3–3 °/s per √s,
-    σ_a 0.5–2 m/s², three sojourn pairs). As truth the turn mode flies 2 °/s left: this
-    preset is a tracker, not a traffic model.
+    mean sojourn 120 s straight, 30 s turning (how these were chosen: ``docs/tracking.md``).
+    As truth the turn mode flies 2 °/s left: this preset is a tracker, not a traffic model.
     """
     base = realistic(dt)
     switch = [[0, 1], [1, 0]]

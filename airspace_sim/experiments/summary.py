@@ -3,7 +3,7 @@
 The interval is Student's t: ``mean ± t(0.975, n−1) · s / √n`` over the cell's runs (seeds),
 with ``s`` the sample standard deviation; it needs n ≥ 2 (NaN otherwise). Runs whose metric is
 not finite (e.g. ``min_separation_m`` = inf when no pair ever came in range) are left out of
-that metric's mean, and counted in ``n``.
+that metric's mean and interval (``runs`` still counts them).
 """
 
 from __future__ import annotations
