@@ -403,7 +403,7 @@ def run(args) -> int:
                 if sigterm.received:
                     raise Terminated
                 world.step()
-                everybody_left = not world.active.any()  # nothing more to see: stop early
+                everybody_left = world.everybody_left  # nothing more to see: stop early
                 if frames is not None and (
                     (k + 1) % args.every == 0 or k + 1 == steps or everybody_left
                 ):
@@ -467,9 +467,11 @@ def _finish(
         "wall_time": round(wall, 3),
         "steps_per_second": round(done / wall, 1) if wall > 0 else None,
         "interrupted": stopped is not None,
-        "all_left": not bool(world.active.any()),
+        "all_left": bool(world.everybody_left),
         "metrics": jsonable(world.metrics()),
     }
+    if args.checkpoint:
+        summary["checkpoint"] = str(args.checkpoint)
     if frames is not None:
         summary["frames"] = len(frames.paths)
         if video is not None:
@@ -477,8 +479,6 @@ def _finish(
         _write_json(frames.directory / "summary.json", summary)
     if args.json:
         _write_json(Path(args.json), summary)
-    if args.checkpoint:
-        summary["checkpoint"] = str(args.checkpoint)
     if not args.quiet:
         print(format_table(summary))
         if frames is not None:
