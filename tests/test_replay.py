@@ -178,6 +178,36 @@ def test_a_simulated_ownship_avoids_real_traffic():
     assert results["bands"]["min_separation_m"] >= 3000.0
 
 
+def test_recorded_aircraft_never_fly_the_advice_beside_an_agent():
+    a, b = _crossing()
+    agent = AircraftSpec(
+        id="rl", position=(0.0, 60000.0), heading_deg=90.0, speed=V, controlled=True
+    )
+    w = _world([a, b], extra=[agent])
+    nan = np.full(w.n, np.nan)
+    conflicts = 0
+    while not w.done:
+        w.step(nan)  # the agent leaves every step to the built-in pilot
+        conflicts += int(w.conflict[:2].any())
+        assert not w.policy.following[:2].any(), w.time
+    assert conflicts > 0  # the recorded pair was advised, and did not follow it
+    assert w.metrics()["avoidance_turn_deg"] == 0.0
+
+
+def test_a_retired_recorded_aircraft_stays_out():
+    a, b = _crossing()
+    w = _world([a, b])
+    for _ in range(40):  # both recorded now
+        w.step()
+    assert w.active.all()
+    w.retire([1])
+    while not w.done:
+        w.step()
+        assert not w.active[1], w.time
+        assert w.active[0] == (w.time <= a.end_s)
+    assert w.retired.tolist() == [False, True]
+
+
 def test_same_seed_same_replay():
     reports = []
     for _ in range(2):
@@ -193,95 +223,6 @@ def test_recorded_autopilot_needs_a_recording():
     spec = AircraftSpec(id="x", position=(0.0, 0.0), heading_deg=0.0, speed=V, autopilot="recorded")
     with pytest.raises(UserError, match="'x': autopilot 'recorded' needs a recording"):
         World(sc, aircraft=[spec])
-
-
-# ------------------------------------------------------------- files, scenario, CLI
-pd = pytest.importorskip("pandas")
-pytest.importorskip("pyproj")
-
-
-def _write_csv(path, flights, centre=(47.0, 8.0)):
-    """The flights as a traffic-style CSV (lat/lon by the frame's inverse, ISO times)."""
-    from airspace_sim.recorded import Frame
-
-    frame = Frame(*centre)
-    rows = []
-    for f in flights:
-        lat, lon = frame.inverse(f.x_m, f.y_m)
-        for k in range(len(f)):
-            rows.append(
-                {
-                    "timestamp": pd.Timestamp(1.6e9 + f.t_s[k], unit="s", tz="UTC").isoformat(),
-                    "icao24": f.id.lower() * 3,
-                    "callsign": f.id,
-                    "latitude": lat[k],
-                    "longitude": lon[k],
-                    "altitude": f.altitude_m[k] / 0.3048,
-                    "groundspeed": 0.0,  # unused: velocity from positions
-                    "track": 0.0,
-                }
-            )
-    pd.DataFrame(rows).to_csv(path, index=False)
-
-
-def test_scenario_mixes_recorded_and_simulated_aircraft(tmp_path):
-    from airspace_sim.scenarios import load
-
-    a, b = _crossing()
-    _write_csv(tmp_path / "f.csv", [a, b])
-    (tmp_path / "mix.toml").write_text(
-        'name = "mix"\nduration = 100\n'
-        '[recorded]\nfile = "f.csv"\ncentre_lat_deg = 47.0\ncentre_lon_deg = 8.0\n'
-        'velocity = "positions"\n'
-        '[[aircraft]]\nid = "own"\nposition = [0.0, 20000.0]\nheading_deg = -90.0\nspeed = 200.0\n'
-    )
-    sc = load(tmp_path / "mix.toml")
-    w = World(sc)
-    assert w.ids == ["own", "aaa-A-0", "bbb-B-0"] and w.moved.tolist() == [False, True, True]
-    # the frame is the given centre: A starts 30 km west of it
-    assert np.allclose(w.positions[1], (-30000.0, 0.0), atol=1.0)
-    (tmp_path / "bad.toml").write_text('name = "b"\n[recorded]\nfile = "f.csv"\nspeed = 3\n')
-    with pytest.raises(UserError, match=r"bad\.toml: recorded\.speed: unknown key"):
-        load(tmp_path / "bad.toml")
-    (tmp_path / "bad2.toml").write_text('name = "b"\n[recorded]\nfile = "nope.csv"\n')
-    with pytest.raises(UserError, match=r"recorded\.file: no such file"):
-        World(load(tmp_path / "bad2.toml"))
-
-
-def _cli(capsys, *args):
-    from airspace_sim.cli import main
-
-    code = main(["replay", *args])
-    out = capsys.readouterr()
-    return code, out.out, out.err
-
-
-def test_cli_replay_reports_json_and_renders(tmp_path, capsys):
-    a, b = _crossing()
-    _write_csv(tmp_path / "f.csv", [a, b])
-    out = tmp_path / "out.json"
-    frames = tmp_path / "frames"
-    code, stdout, stderr = _cli(
-        capsys,
-        str(tmp_path / "f.csv"), "--velocity", "positions", "--start", "100", "--duration",
-        "80", "--json", str(out), "--render", str(frames), "--every", "40", "--gif",
-        "--size", "128x128",
-    )  # fmt: skip
-    assert code == 0, stderr
-    s = json.loads(out.read_text())
-    assert s["steps"] == 80 and s["replay"]["los_pairs"] == 1
-    assert s["real_time_factor"] > 0 and s["metrics"]["aircraft"] == 2
-    assert (frames / "run.gif").is_file() and s["frames"] == 3
-    assert "replay.los_pairs" in stdout
-
-
-def test_cli_replay_bad_file_is_one_line(tmp_path, capsys):
-    (tmp_path / "bad.csv").write_text("timestamp,icao24,latitude,longitude,groundspeed,track\n"
-                                      "2020-01-01,abc,91.5,8,400,90\n")  # fmt: skip
-    code, _, stderr = _cli(capsys, str(tmp_path / "bad.csv"))
-    assert code == 2
-    assert stderr.strip().count("\n") == 0
-    assert "bad.csv: row 1 (line 2), column 'latitude'" in stderr
 
 
 def test_a_pickled_replay_world_continues_bit_for_bit():

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 import time
 from pathlib import Path
 
@@ -159,9 +158,14 @@ def build_scenario(args):
 
 
 def run(args) -> int:
-    from tqdm import tqdm
-
-    from airspace_sim.commands.run import Frames, _write_json, format_table, jsonable, track_owners
+    from airspace_sim.commands.run import (
+        Frames,
+        format_table,
+        jsonable,
+        step_world,
+        track_owners,
+        write_summary,
+    )
     from airspace_sim.recorded.analysis import ReplayStats
     from airspace_sim.world import World
 
@@ -187,27 +191,11 @@ def run(args) -> int:
         )
         frames.add(first)
     steps = sc.n_steps
-    bar = tqdm(
-        total=steps,
-        unit="step",
-        desc=sc.name,
-        disable=args.quiet or not sys.stderr.isatty(),
-        file=sys.stderr,
-        leave=False,
-    )
-    interrupted = False
     t0, cpu0 = time.perf_counter(), time.process_time()
-    try:
-        for k in range(steps):
-            world.step()
-            stats.observe()
-            if frames is not None and ((k + 1) % args.every == 0 or k + 1 == steps):
-                frames.add(world.snapshot())
-            bar.update(1)
-    except KeyboardInterrupt:
-        interrupted = True
-    finally:
-        bar.close()
+    stopped = step_world(
+        world, steps, sc.name, args.quiet, frames, args.every, after_step=lambda k: stats.observe()
+    )
+    interrupted = stopped is not None
     wall = time.perf_counter() - t0
     cpu = time.process_time() - cpu0  # this process's CPU s: on a shared machine wall
     # time also counts the waits for a core
@@ -232,18 +220,12 @@ def run(args) -> int:
         "replay": jsonable(stats.report()),
         "metrics": jsonable(world.metrics()),
     }
-    if frames is not None:
-        summary["frames"] = len(frames.paths)
-        if video_path is not None:
-            summary["video"] = str(video_path)
-        _write_json(frames.directory / "summary.json", summary)
-    if args.json:
-        _write_json(Path(args.json), summary)
+    write_summary(args, summary, frames, video_path)
     if not args.quiet:
         both = {"replay": summary["replay"], "world": summary["metrics"]}
         print(format_table({**summary, "metrics": both}))
         if frames is not None:
             print(f"\n{len(frames.paths)} frames in {frames.directory}")
-    if interrupted:
-        raise KeyboardInterrupt
+    if stopped is not None:
+        raise stopped
     return 0

@@ -372,8 +372,6 @@ def run(args) -> int:
         )
         frames.add(first)
 
-    from tqdm import tqdm
-
     planned_total = world.step_count + steps
 
     def checkpoint_meta() -> dict:
@@ -385,42 +383,23 @@ def run(args) -> int:
             "total_steps": planned_total,
         }
 
+    def periodic_checkpoint(k: int) -> None:
+        if args.checkpoint_every and (k + 1) % args.checkpoint_every == 0 and k + 1 < steps:
+            save_checkpoint(Path(args.checkpoint), world, checkpoint_meta())
+
     start_step = world.step_count
     interrupted: KeyboardInterrupt | None = None
     failed: UserError | None = None  # a frame that could not be written: save, then report
     t0 = time.perf_counter()
-    bar = tqdm(
-        total=steps,
-        unit="step",
-        desc=name,
-        disable=args.quiet or not sys.stderr.isatty(),
-        file=sys.stderr,
-        leave=False,
-    )
     with _SigtermFlag() as sigterm:
         try:
-            for k in range(steps):
-                if sigterm.received:
-                    raise Terminated
-                world.step()
-                everybody_left = not world.active.any()  # nothing more to see: stop early
-                if frames is not None and (
-                    (k + 1) % args.every == 0 or k + 1 == steps or everybody_left
-                ):
-                    frames.add(world.snapshot())
-                bar.update(1)
-                if args.checkpoint_every and (k + 1) % args.checkpoint_every == 0 and k + 1 < steps:
-                    save_checkpoint(Path(args.checkpoint), world, checkpoint_meta())
-                if everybody_left:
-                    break
-        except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM (Terminated)
-            interrupted = exc
+            interrupted = step_world(
+                world, steps, name, args.quiet, frames, args.every, sigterm, periodic_checkpoint
+            )
         except UserError as exc:
             if not args.checkpoint or frames is None or not str(exc).startswith("--render"):
                 raise
             failed = exc
-        finally:
-            bar.close()
         wall = time.perf_counter() - t0
         stopped = interrupted or failed
         # a SIGTERM while the outputs are written waits for them, then ends the run
@@ -440,6 +419,63 @@ def run(args) -> int:
         if sigterm.received and stopped is None:
             raise Terminated
         return status
+
+
+def step_world(
+    world,
+    steps: int,
+    desc: str,
+    quiet: bool,
+    frames=None,
+    every: int = 1,
+    sigterm=None,
+    after_step=None,
+) -> KeyboardInterrupt | None:
+    """Step ``world`` up to ``steps`` times behind a tqdm bar (the ``run`` and ``replay``
+    loop): a frame every ``every`` steps, at the last and when :attr:`World.everybody_left`
+    (which stops early: nothing more to see); ``after_step(k)`` after step ``k`` (0-based).
+    Returns the Ctrl-C or SIGTERM (:class:`Terminated`, when ``sigterm`` is a
+    :class:`_SigtermFlag`) that stopped it, else None; anything else propagates."""
+    from tqdm import tqdm
+
+    bar = tqdm(
+        total=steps,
+        unit="step",
+        desc=desc,
+        disable=quiet or not sys.stderr.isatty(),
+        file=sys.stderr,
+        leave=False,
+    )
+    try:
+        for k in range(steps):
+            if sigterm is not None and sigterm.received:
+                raise Terminated
+            world.step()
+            left = world.everybody_left
+            if frames is not None and ((k + 1) % every == 0 or k + 1 == steps or left):
+                frames.add(world.snapshot())
+            bar.update(1)
+            if after_step is not None:
+                after_step(k)
+            if left:
+                break
+    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM (Terminated)
+        return exc
+    finally:
+        bar.close()
+    return None
+
+
+def write_summary(args, summary: dict, frames, video) -> None:
+    """Write ``summary`` to ``<--render>/summary.json`` (with the frame count and video)
+    and to ``--json``, whichever were asked for."""
+    if frames is not None:
+        summary["frames"] = len(frames.paths)
+        if video is not None:
+            summary["video"] = str(video)
+        _write_json(frames.directory / "summary.json", summary)
+    if args.json:
+        _write_json(Path(args.json), summary)
 
 
 def _finish(
@@ -467,18 +503,12 @@ def _finish(
         "wall_time": round(wall, 3),
         "steps_per_second": round(done / wall, 1) if wall > 0 else None,
         "interrupted": stopped is not None,
-        "all_left": not bool(world.active.any()),
+        "all_left": bool(world.everybody_left),
         "metrics": jsonable(world.metrics()),
     }
-    if frames is not None:
-        summary["frames"] = len(frames.paths)
-        if video is not None:
-            summary["video"] = str(video)
-        _write_json(frames.directory / "summary.json", summary)
-    if args.json:
-        _write_json(Path(args.json), summary)
     if args.checkpoint:
         summary["checkpoint"] = str(args.checkpoint)
+    write_summary(args, summary, frames, video)
     if not args.quiet:
         print(format_table(summary))
         if frames is not None:

@@ -118,22 +118,29 @@ def agent_ids(scenario, agents=None) -> list[str]:
 
     ``agents`` None keeps the scenario's ``controlled`` marks, or, if it marks none,
     controls the first aircraft; ``"all"`` every aircraft; an int n the first n
-    (hand-placed, then generated); a list of ids exactly those, any of them.
+    (hand-placed, then generated); a list of ids exactly those, any of them. Recorded
+    aircraft (kinematic autopilots) are never agents: they fly their recording whatever
+    the action, so ``"all"`` and n skip them and a listed one is a :class:`UserError`.
     """
+    from airspace_sim import registry
     from airspace_sim.scenarios import build_aircraft
 
     specs = build_aircraft(scenario, np.random.default_rng(scenario.seed))
     ids = [a.id for a in specs]
+    recorded = {a.id for a in specs if registry.get("autopilot", a.autopilot).kinematic}
+    flyable = [a for a in ids if a not in recorded]
+    if not flyable:
+        raise UserError("agents: every aircraft is recorded traffic; none can be an agent")
     if agents is None:
-        marked = [a.id for a in specs if a.controlled]
-        return marked or ids[:1]
+        marked = [a.id for a in specs if a.controlled and a.id not in recorded]
+        return marked or flyable[:1]
     if isinstance(agents, str):
         if agents != "all":
             raise UserError(f"agents: expected 'all', a number or a list of ids, got {agents!r}")
-        return ids
+        return flyable
     if isinstance(agents, (int, np.integer)) and not isinstance(agents, bool):
-        n = checks.integer(agents, "agents", 1, len(ids))
-        return ids[:n]
+        n = checks.integer(agents, "agents", 1, len(flyable))
+        return flyable[:n]
     if not isinstance(agents, (list, tuple)):
         raise UserError(f"agents: expected 'all', a number or a list of ids, got {agents!r}")
     wanted = [str(a) for a in agents]
@@ -145,6 +152,12 @@ def agent_ids(scenario, agents=None) -> list[str]:
         raise UserError(f"agents: unknown aircraft {unknown[0]!r} (known: {known})")
     if len(set(wanted)) != len(wanted):
         raise UserError(f"agents: an aircraft is listed twice, got {wanted}")
+    taken = [a for a in wanted if a in recorded]
+    if taken:
+        raise UserError(
+            f"agents: {taken[0]!r} is recorded traffic (it flies its recording); it cannot be "
+            "an agent"
+        )
     return [a for a in ids if a in wanted]
 
 

@@ -98,6 +98,9 @@ class World:
         self.controlled = np.array([a.controlled for a in self.specs], dtype=bool)
         self.avoid = np.array([a.avoid for a in self.specs], dtype=bool)
         self.active = np.ones(n, dtype=bool)
+        #: (N,) bool, aircraft taken out of play by :meth:`retire`; they never come back,
+        #: whatever their recording says (``active`` has one owner: the step, which honours it)
+        self.retired = np.zeros(n, dtype=bool)
         self.turn_rates = np.zeros(n)
         self.velocities = self._velocities()
         self.r_safe = float(sc.separation.r_safe)
@@ -224,8 +227,9 @@ class World:
             if np.isinf(hr).any():
                 raise UserError("heading_rate: contains an infinite value (use NaN for 'built-in')")
             agent = self.controlled & np.isfinite(hr)
-        # an avoiding agent that leaves a step to the built-in pilot flies the resolver too
-        avoid = self.avoid & ~agent if self.controlled.any() else None
+        # an avoiding agent that leaves a step to the built-in pilot flies the resolver too;
+        # recorded (kinematic) aircraft never do: they fly their recording
+        avoid = self.avoid & ~self.moved & ~agent if self.controlled.any() else None
         rate = self.policy.override(
             rate, desired, self.active, self.velocities, self.max_turn_rate * self.dt, avoid
         )
@@ -286,12 +290,14 @@ class World:
 
     def _presence(self):
         """Bring in the kinematic autopilots' aircraft that are recorded now and take out
-        those that are not (``active``, and position, heading and speed of the arrivals).
+        those that are not or were retired (``active``, and position, heading and speed of
+        the arrivals).
         Returns ``(arrive, leave)`` (int arrays) for the airspace."""
         state = self.flight_state()
         arrive, leave = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
         for members, ap in self._kinematic:
             present, pos, vel = ap.presence(state)
+            present = present & ~self.retired[members]
             new = present & ~self.active[members]
             gone = ~present & self.active[members]
             a = members[new]
@@ -373,12 +379,15 @@ class World:
 
     # --------------------------------------------------------------- outputs
     @property
+    def everybody_left(self) -> bool:
+        """Nobody is flying and nobody can come: never while recorded traffic is in the
+        world, which may still arrive (its aircraft come and go as their data say)."""
+        return not (self.active.any() or self._kinematic)
+
+    @property
     def done(self) -> bool:
-        """Simulated time reached the scenario's duration, or nobody is flying (and, with
-        recorded traffic, which may still arrive, the duration only)."""
-        return self.step_count >= self.scenario.n_steps or not (
-            self.active.any() or self._kinematic
-        )
+        """Simulated time reached the scenario's duration, or :attr:`everybody_left`."""
+        return self.step_count >= self.scenario.n_steps or self.everybody_left
 
     def run(self, steps: int | None = None) -> dict:
         """Step ``steps`` times (default: until :attr:`done`); return :meth:`metrics`."""
@@ -392,8 +401,10 @@ class World:
 
     def retire(self, indices) -> None:
         """Take aircraft out of play now (``active`` False, out of the pymunk space): the
-        env's ``ended="leave"`` for agents whose episode ended. indices : (k,) int."""
+        env's ``ended="leave"`` for agents whose episode ended; a retired recorded aircraft
+        stays out though its recording goes on. indices : (k,) int."""
         idx = np.asarray(indices, dtype=np.int64).reshape(-1)
+        self.retired[idx] = True
         idx = idx[self.active[idx]]
         if idx.size:
             self.active[idx] = False

@@ -1,0 +1,152 @@
+"""Recorded traffic from files: the scenario's [recorded] section, the ``replay`` command
+and the env's agents, on flights the tests make and write as traffic-style CSV.
+
+Oracles: the frame's inverse (positions back where they were written), the flights'
+closed-form geometry (one LoS pair in the crossing), the ids the files hold.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from test_replay import _crossing, _line
+
+from airspace_sim.errors import UserError
+from airspace_sim.world import World
+
+pd = pytest.importorskip("pandas")
+pytest.importorskip("pyproj")
+
+
+def _write_csv(path, flights, centre=(47.0, 8.0)):
+    """The flights as a traffic-style CSV (lat/lon by the frame's inverse, ISO times)."""
+    from airspace_sim.recorded import Frame
+
+    frame = Frame(*centre)
+    rows = []
+    for f in flights:
+        lat, lon = frame.inverse(f.x_m, f.y_m)
+        for k in range(len(f)):
+            rows.append(
+                {
+                    "timestamp": pd.Timestamp(1.6e9 + f.t_s[k], unit="s", tz="UTC").isoformat(),
+                    "icao24": f.id.lower() * 3,
+                    "callsign": f.id,
+                    "latitude": lat[k],
+                    "longitude": lon[k],
+                    "altitude": f.altitude_m[k] / 0.3048,
+                    "groundspeed": 0.0,  # unused: velocity from positions
+                    "track": 0.0,
+                }
+            )
+    pd.DataFrame(rows).to_csv(path, index=False)
+
+
+def test_scenario_mixes_recorded_and_simulated_aircraft(tmp_path):
+    from airspace_sim.scenarios import load
+
+    a, b = _crossing()
+    _write_csv(tmp_path / "f.csv", [a, b])
+    (tmp_path / "mix.toml").write_text(
+        'name = "mix"\nduration = 100\n'
+        '[recorded]\nfile = "f.csv"\ncentre_lat_deg = 47.0\ncentre_lon_deg = 8.0\n'
+        'velocity = "positions"\n'
+        '[[aircraft]]\nid = "own"\nposition = [0.0, 20000.0]\nheading_deg = -90.0\nspeed = 200.0\n'
+    )
+    sc = load(tmp_path / "mix.toml")
+    w = World(sc)
+    assert w.ids == ["own", "aaa-A-0", "bbb-B-0"] and w.moved.tolist() == [False, True, True]
+    # the frame is the given centre: A starts 30 km west of it
+    assert np.allclose(w.positions[1], (-30000.0, 0.0), atol=1.0)
+    (tmp_path / "bad.toml").write_text('name = "b"\n[recorded]\nfile = "f.csv"\nspeed = 3\n')
+    with pytest.raises(UserError, match=r"bad\.toml: recorded\.speed: unknown key"):
+        load(tmp_path / "bad.toml")
+    (tmp_path / "bad2.toml").write_text('name = "b"\n[recorded]\nfile = "nope.csv"\n')
+    with pytest.raises(UserError, match=r"recorded\.file: no such file"):
+        World(load(tmp_path / "bad2.toml"))
+
+
+def _cli(capsys, *args):
+    from airspace_sim.cli import main
+
+    code = main(["replay", *args])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_cli_replay_reports_json_and_renders(tmp_path, capsys):
+    a, b = _crossing()
+    _write_csv(tmp_path / "f.csv", [a, b])
+    out = tmp_path / "out.json"
+    frames = tmp_path / "frames"
+    code, stdout, stderr = _cli(
+        capsys,
+        str(tmp_path / "f.csv"), "--velocity", "positions", "--start", "100", "--duration",
+        "80", "--json", str(out), "--render", str(frames), "--every", "40", "--gif",
+        "--size", "128x128",
+    )  # fmt: skip
+    assert code == 0, stderr
+    s = json.loads(out.read_text())
+    assert s["steps"] == 80 and s["replay"]["los_pairs"] == 1
+    assert s["real_time_factor"] > 0 and s["metrics"]["aircraft"] == 2
+    assert (frames / "run.gif").is_file() and s["frames"] == 3
+    assert "replay.los_pairs" in stdout
+
+
+def test_cli_replay_bad_file_is_one_line(tmp_path, capsys):
+    (tmp_path / "bad.csv").write_text("timestamp,icao24,latitude,longitude,groundspeed,track\n"
+                                      "2020-01-01,abc,91.5,8,400,90\n")  # fmt: skip
+    code, _, stderr = _cli(capsys, str(tmp_path / "bad.csv"))
+    assert code == 2
+    assert stderr.strip().count("\n") == 0
+    assert "bad.csv: row 1 (line 2), column 'latitude'" in stderr
+
+
+def _mixed_scenario(tmp_path):
+    a, b = _crossing()
+    _write_csv(tmp_path / "f.csv", [a, b])
+    path = tmp_path / "mix.toml"
+    path.write_text(
+        'name = "mix"\nduration = 100\n'
+        '[recorded]\nfile = "f.csv"\ncentre_lat_deg = 47.0\ncentre_lon_deg = 8.0\n'
+        'velocity = "positions"\n'
+        '[[aircraft]]\nid = "own"\nposition = [0.0, 20000.0]\nheading_deg = -90.0\nspeed = 200.0\n'
+    )
+    return path
+
+
+def test_recorded_aircraft_are_never_env_agents(tmp_path):
+    import airspace_sim.env as aenv
+
+    path = _mixed_scenario(tmp_path)
+    for agents in ("all", 1, None):
+        env = aenv.parallel_env(scenario=str(path), agents=agents)
+        assert env.possible_agents == ["own"], agents
+    with pytest.raises(UserError, match="'aaa-A-0' is recorded traffic") as info:
+        aenv.parallel_env(scenario=str(path), agents=["own", "aaa-A-0"])
+    assert "\n" not in str(info.value)
+    with pytest.raises(UserError, match="agents: expected an integer"):
+        aenv.parallel_env(scenario=str(path), agents=2)  # only one aircraft can be an agent
+
+
+def test_cli_run_waits_for_recorded_traffic_that_arrives_later(tmp_path, capsys):
+    from airspace_sim.cli import main
+
+    # C is recorded 0..100 s and 200..300 s: nobody flies in between, then C comes back
+    t = np.concatenate([np.arange(0.0, 101.0, 10.0), np.arange(200.0, 301.0, 10.0)])
+    _write_csv(tmp_path / "f.csv", [_line("C", (0.0, 0.0), 30.0, t)])
+    (tmp_path / "gap.toml").write_text(
+        'name = "gap"\nduration = 300\n'
+        '[recorded]\nfile = "f.csv"\ncentre_lat_deg = 47.0\ncentre_lon_deg = 8.0\n'
+        'velocity = "positions"\n'
+    )
+    out, ckpt = tmp_path / "s.json", tmp_path / "run.ckpt"
+    args = [str(tmp_path / "gap.toml"), "--json", str(out), "--checkpoint", str(ckpt), "--quiet"]
+    code = main(["run", *args])
+    assert code == 0, capsys.readouterr().err
+    s = json.loads(out.read_text())
+    assert s["steps"] == 300 and not s["all_left"]  # the duration, not the gap, ended it
+    assert s["metrics"]["flight_hours"] == pytest.approx(201 / 3600, abs=2 / 3600)
+    assert s["checkpoint"] == str(ckpt)  # in the file as on the screen
