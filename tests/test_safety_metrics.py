@@ -15,9 +15,10 @@ from airspace_sim.scenarios.schema import (
     Separation,
     TrackerSpec,
 )
+from airspace_sim.tracking.keymap import KeyMap
 from airspace_sim.world import World
 from airspace_sim.world.bodies import LOS, NMAC, RANGE
-from airspace_sim.world.metrics import DMOD_M, HMD_M, TAU_MOD_S, WorldMetrics
+from airspace_sim.world.metrics import DMOD_M, HMD_M, TAU_MOD_S, WorldMetrics, pair_reach
 from airspace_sim.world.risk import parse_seeds, risk_ratio
 
 FT = 0.3048
@@ -100,6 +101,78 @@ def test_well_clear_of_random_states_matches_scalar_definition():
     )
     assert 10 < expected < n * (n - 1) // 2
     assert m.wcv_events == expected
+
+
+def _predicted_scalar(s, v, r_safe, lookahead):
+    ww = v @ v
+    t = min(max(-(s @ v) / ww, 0.0), lookahead) if ww > 0 else 0.0
+    return math.hypot(*(s + t * v)) < r_safe
+
+
+def test_pair_scan_over_many_grid_cells_matches_brute_force():
+    # slow aircraft and a short look-ahead: cells ~2 km wide over a 30 km square, so pairs
+    # straddle cells; every flag must match the scalar definitions over all pairs
+    rng = np.random.default_rng(5)
+    n, r_safe, look = 300, 300.0, 10.0
+    pos = rng.uniform(-15000, 15000, (n, 2))
+    vel = rng.uniform(-14, 14, (n, 2))
+    following = rng.random(n) < 0.2
+    active = rng.random(n) < 0.9
+    assert pair_reach(np.hypot(*vel.T).max(), DMOD_M, TAU_MOD_S, r_safe, look) < 2500
+    m = WorldMetrics(n, r_safe, 152.4, 1.0)
+    none = {t: np.zeros(0, np.int64) for t in (LOS, NMAC, RANGE)}
+    began = {t: np.zeros((0, 2), np.int64) for t in (LOS, NMAC, RANGE)}
+    m.contacts(pos, none, began)
+    m.conflicts(np.zeros(n, bool))
+    m.safety(0.0, pos, vel, active, following, look)
+    wcv, pred = set(), set()
+    for i in range(n):
+        for j in range(i + 1, n):
+            if not (active[i] and active[j]):
+                continue
+            s, v = pos[j] - pos[i], vel[j] - vel[i]
+            if _wcv_scalar(s, v):
+                wcv.add(i * n + j)
+            if not following[i] and not following[j] and _predicted_scalar(s, v, r_safe, look):
+                pred.add(i * n + j)
+    assert len(wcv) > 20 and len(pred) > 5
+    assert (
+        m.wcv_events
+        == m.wcv_pair_steps
+        == len(wcv)
+        == m.report(1, 0.0, np.zeros(n), np.zeros(n, bool))["wcv_pairs"]
+    )
+    assert set(m._wcv_prev.tolist()) == wcv
+    assert len(m._predicted) == len(pred) and (m._predicted.get(sorted(pred)) >= 0).all()
+
+
+def test_metrics_of_a_sparse_2000_aircraft_world_hold_no_all_pairs_array():
+    # 2000 aircraft over 1000 km: a few thousand pairs in the 40 km range out of ~2 million
+    rng = np.random.default_rng(7)
+    xy = rng.uniform(0.0, 1e6, (2000, 2))
+    heading = rng.uniform(0.0, 360.0, 2000)
+    craft = [
+        AircraftSpec(id=f"a{k}", position=tuple(p), heading_deg=float(h), speed=230.0)
+        for k, (p, h) in enumerate(zip(xy, heading))
+    ]
+    sc = scene(craft, duration=3.0, lookahead=45.0)
+    w = World(sc)
+    in_range = []
+    while not w.done:
+        w.step()
+        in_range.append(w.airspace.pair_arrays(RANGE)[0].size)
+    n = w.n
+    bound = 8 * (n + max(in_range))
+    assert bound < n * (n - 1) // 2 // 20
+    m = w.metrics_acc
+    held = [v for v in vars(m).values() if isinstance(v, np.ndarray)]
+    for v in vars(m).values():
+        if isinstance(v, KeyMap):
+            held += [a for a in vars(v).values() if isinstance(a, np.ndarray)]
+        if isinstance(v, tuple):
+            held += [a for a in v if isinstance(a, np.ndarray)]
+    assert held and max(a.size for a in held) <= bound
+    assert w.metrics()["wcv_pairs"] == m.wcv_events  # nothing left violation in 3 s
 
 
 # ----------------------------------------------------------- induced losses
@@ -290,6 +363,28 @@ def test_arrival_delay_of_an_avoidance_detour_is_the_extra_path_over_speed():
     mean_extra_s = m["extra_path_m"] / 2 / v
     assert mean_extra_s > 0.5
     assert m["arrival_delay_mean_s"] == pytest.approx(mean_extra_s, abs=1e-9)
+
+
+def test_retired_route_aircraft_neither_arrives_nor_counts_as_flying():
+    # the env retires agents whose episode ended (NMAC, truncation): they left the world
+    # without finishing their plan
+    craft = [
+        AircraftSpec(
+            id=name,
+            position=(0.0, 20000.0 * k),
+            heading_deg=0.0,
+            speed=200.0,
+            autopilot="route",
+            waypoints=[(10100.0, 20000.0 * k)],
+        )
+        for k, name in enumerate("ab")
+    ]
+    w = World(scene(craft))
+    w.run(5)
+    w.retire([w.index("b")])
+    m = w.run()
+    assert m["arrived"] == 1 and m["not_arrived"] == 0
+    assert m["arrival_delay_mean_s"] == pytest.approx(math.ceil(10100.0 / 200.0 - 1) - 50.5)
 
 
 def test_no_plan_no_arrival_stats():

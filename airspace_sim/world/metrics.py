@@ -45,12 +45,22 @@ Safety-assurance metrics (DAIDALUS / ACAS X study conventions; ``docs/safety.md`
 - ``alerts_per_flight_hour``: ``alerts`` / ``flight_hours`` (Σ over aircraft of the time
   flown, h; NaN when nothing flew); ``first_alert_s``: simulated time of the first alert
   of the run (NaN if none).
-- arrival, over aircraft with a plan: ``arrived`` (left the world at the end of their
-  route), ``not_arrived`` (still flying at the end of the run; a ``straight`` autopilot
-  never arrives), ``arrival_delay_mean_s`` / ``arrival_delay_max_s`` over the arrived:
+- arrival, over aircraft with a plan: ``arrived`` (their autopilot finished the plan, a
+  route's last waypoint reached, and they left the world), ``not_arrived`` (still flying at
+  the end of the run; a ``straight`` autopilot never arrives); aircraft taken out without
+  finishing (the env's agents retired after an NMAC or truncation) are neither.
+  ``arrival_delay_mean_s`` / ``arrival_delay_max_s`` over the arrived:
   arrival time minus the planned straight time ``plan length / speed`` (a route is
   captured within one step's travel of its last waypoint, so an undisturbed flight has a
   delay in ``[−dt, 0]``); NaN when none arrived.
+
+Pair reach: the safety pass never scans all N(N−1)/2 pairs. Well clear and the unresolved
+prediction are flagged only for pairs closer than :func:`pair_reach` (from the fastest
+active aircraft), found on a grid of cells that wide; state is kept for flagged pairs only
+(keys ``i·N + j`` in :class:`~airspace_sim.tracking.keymap.KeyMap` hashes). The reach is not
+the sensor range and may exceed it (460 m/s closing: 16.2 km for well clear; with a 120 s
+look-ahead and ``r_safe`` 3 km, 58 km for the prediction; the scenarios' range is 30-40 km),
+so the world's RANGE pairs are not used: the flags are exactly those of an all-pairs scan.
 
 The risk ratio (NMACs with the resolver over NMACs without, same seeds) needs two runs:
 :func:`airspace_sim.world.risk.risk_ratio`.
@@ -63,6 +73,7 @@ import math
 import numpy as np
 from numba import njit
 
+from airspace_sim.tracking.keymap import KeyMap
 from airspace_sim.world.bodies import LOS, NMAC, RANGE
 
 #: DO-365 horizontal well-clear thresholds (module docstring): m, m, s
@@ -71,49 +82,110 @@ HMD_M = 1219.2  # 4000 ft
 TAU_MOD_S = 35.0
 
 
+def pair_reach(speed_max, dmod, tau_mod, r_safe, lookahead):
+    """m: no pair farther apart than this can violate well clear or be predicted in
+    conflict, when no aircraft flies faster than ``speed_max`` m/s (relative speeds
+    ``|v| ≤ V = 2·speed_max``).
+
+    Well clear beyond DMOD needs ``s·v < 0`` and ``d² − DMOD² ≤ τ*_mod·(−s·v) ≤ τ*_mod·d·V``,
+    so ``d ≤ (τ*_mod V + √(τ*_mod² V² + 4 DMOD²))/2``; the unresolved prediction needs
+    ``|s + t v| < r_safe`` for some ``t ≤ look-ahead``, so ``d < r_safe + look-ahead·V``.
+    A relative 1e-6 plus 1 m covers float rounding. Neither bound is tied to the sensor
+    range: e.g. 460 m/s closing gives 16.2 km for well clear and, with a 120 s look-ahead
+    and ``r_safe`` 3 km, 58 km for the prediction, beyond the scenarios' 40 km range.
+    """
+    v = 2.0 * float(speed_max)
+    wcv = 0.5 * (tau_mod * v + math.sqrt((tau_mod * v) ** 2 + 4.0 * dmod * dmod))
+    return max(wcv, dmod, r_safe + lookahead * v) * (1.0 + 1e-6) + 1.0
+
+
+@njit(cache=True)
+def _push(buf, n, key):
+    """``buf`` with ``key`` written at ``n`` (doubled first when full)."""
+    if n == buf.size:
+        grown = np.empty(2 * buf.size, dtype=np.int64)
+        grown[:n] = buf[:n]
+        buf = grown
+    buf[n] = key
+    return buf
+
+
+@njit(cache=True)
+def _cell_start(cx, cy, x, y):
+    """First index of the (x, y) cell in the lexicographically sorted cells (cx, cy), or
+    −1 if there is none."""
+    lo, hi = 0, cx.size
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if cx[mid] < x or (cx[mid] == x and cy[mid] < y):
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo if lo < cx.size and cx[lo] == x and cy[lo] == y else -1
+
+
 @njit(cache=True, error_model="numpy")
-def _pair_scan(
-    pos, vel, active, following, dmod2, hmd2, tau_mod, r_safe2, lookahead, prev, now, ever,
-    predicted,
-):  # fmt: skip
-    """Well clear and unresolved-conflict flags of every pair i < j (row by row) at one
-    instant: ``now`` (P,) set to the pairs violating well clear (``ever`` or-ed with it);
-    ``predicted`` set where both aircraft flew their own plan in the last step and their
-    straight-line closest approach within ``lookahead`` s is under √r_safe2. pos, vel
-    (N, 2) m, m/s; active, following (N,) bool; squared thresholds m², τ s. Returns
-    (episodes begun: pairs in ``now`` not in ``prev``, pairs in ``now``)."""
-    n = pos.shape[0]
-    k = -1
-    events = 0
-    count = 0
-    for i in range(n):
-        for j in range(i + 1, n):
-            k += 1
-            now[k] = False
-            if not (active[i] and active[j]):
-                continue
-            sx, sy = pos[j, 0] - pos[i, 0], pos[j, 1] - pos[i, 1]
-            vx, vy = vel[j, 0] - vel[i, 0], vel[j, 1] - vel[i, 1]
-            ss = sx * sx + sy * sy
-            sv = sx * vx + sy * vy
-            vv = vx * vx + vy * vy
-            wcv = ss <= dmod2
-            if not wcv and sv < 0.0:  # closing, so vv > 0
-                if (dmod2 - ss) / sv <= tau_mod:
-                    wcv = ss - sv * sv / vv <= hmd2
-            if wcv:
-                now[k] = True
-                ever[k] = True
-                count += 1
-                if not prev[k]:
-                    events += 1
-            if not predicted[k] and not following[i] and not following[j]:
-                tc = 0.0
-                if vv > 0.0:
-                    tc = min(max(-sv / vv, 0.0), lookahead)
-                if ss + 2.0 * tc * sv + tc * tc * vv < r_safe2:
-                    predicted[k] = True
-    return events, count
+def _pair_scan(ids, cx, cy, pos, vel, following, n_key, dmod2, hmd2, tau_mod, r_safe2, lookahead):
+    """Well clear and unresolved-conflict flags of the pairs of aircraft in the same or
+    neighbouring grid cells (cells at least :func:`pair_reach` wide, so every pair that
+    can be flagged is tested, each once).
+
+    ids (M,) int64 aircraft, sorted by their cells (cx, cy) (M,) int64 (lexicographic);
+    pos, vel (N, 2) m, m/s; following (N,) bool; n_key: keys ``i·n_key + j`` (``i < j``);
+    squared thresholds m², τ s. Returns ``(wcv (W,), predicted (Q,))`` keys, unsorted:
+    pairs violating well clear, and pairs neither of whose aircraft flew the CDA policy in
+    the last step with a straight-line closest approach within ``lookahead`` s under
+    √r_safe2. Time O(M log M + pairs tested), memory O(M + W + Q).
+    """
+    m = ids.size
+    wcv = np.empty(16, dtype=np.int64)
+    pred = np.empty(16, dtype=np.int64)
+    nw = 0
+    nq = 0
+    a0 = 0
+    while a0 < m:
+        a1 = a0 + 1
+        while a1 < m and cx[a1] == cx[a0] and cy[a1] == cy[a0]:
+            a1 += 1
+        # the cell itself and the four neighbours after it: each neighbouring pair once
+        for nb in range(5):
+            if nb == 0:
+                b0, b1 = a0, a1
+            else:
+                dx = 0 if nb == 1 else 1
+                dy = (1, -1, 0, 1)[nb - 1]
+                b0 = _cell_start(cx, cy, cx[a0] + dx, cy[a0] + dy)
+                if b0 < 0:
+                    continue
+                b1 = b0 + 1
+                while b1 < m and cx[b1] == cx[b0] and cy[b1] == cy[b0]:
+                    b1 += 1
+            for a in range(a0, a1):
+                for b in range(b0 if nb else a + 1, b1):
+                    i, j = ids[a], ids[b]
+                    if i > j:
+                        i, j = j, i
+                    sx, sy = pos[j, 0] - pos[i, 0], pos[j, 1] - pos[i, 1]
+                    vx, vy = vel[j, 0] - vel[i, 0], vel[j, 1] - vel[i, 1]
+                    ss = sx * sx + sy * sy
+                    sv = sx * vx + sy * vy
+                    vv = vx * vx + vy * vy
+                    flag = ss <= dmod2
+                    if not flag and sv < 0.0:  # closing, so vv > 0
+                        if (dmod2 - ss) / sv <= tau_mod:
+                            flag = ss - sv * sv / vv <= hmd2
+                    if flag:
+                        wcv = _push(wcv, nw, i * n_key + j)
+                        nw += 1
+                    if not following[i] and not following[j]:
+                        tc = 0.0
+                        if vv > 0.0:
+                            tc = min(max(-sv / vv, 0.0), lookahead)
+                        if ss + 2.0 * tc * sv + tc * tc * vv < r_safe2:
+                            pred = _push(pred, nq, i * n_key + j)
+                            nq += 1
+        a0 = a1
+    return wcv[:nw], pred[:nq]
 
 
 class WorldMetrics:
@@ -151,12 +223,10 @@ class WorldMetrics:
         self.mode_hits = 0
         self.mode_samples = 0
         self._prev_conflict = np.zeros(n, dtype=bool)
-        # safety(): flags per unordered pair i < j, row by row (np.triu_indices order)
-        pairs = n * (n - 1) // 2
-        self._wcv_now = np.zeros(pairs, dtype=bool)
-        self._wcv_prev = np.zeros(pairs, dtype=bool)
-        self._wcv_ever = np.zeros(pairs, dtype=bool)
-        self._predicted = np.zeros(pairs, dtype=bool)  # an unresolved conflict was seen
+        # safety(): pair keys i·N + j (i < j) of the flagged pairs only, never all N(N−1)/2
+        self._wcv_prev = np.zeros(0, dtype=np.int64)  # sorted, in violation at the last call
+        self._wcv_ever = KeyMap()  # pairs ever in violation (values unused)
+        self._predicted = KeyMap()  # pairs an unresolved conflict was seen for
         self.wcv_events = 0
         self.wcv_pair_steps = 0
         self.induced_keys: set[int] = set()
@@ -165,8 +235,7 @@ class WorldMetrics:
         self.first_alert = math.nan
         self.flight_s = 0.0
         self.speed = np.zeros(n)  # m/s, last speed flown
-        self.arrival = np.full(n, np.nan)  # s, when the aircraft left the world
-        self._was_active = np.ones(n, dtype=bool)
+        self.arrival = np.full(n, np.nan)  # s, when the aircraft finished its plan
         self._active = np.ones(n, dtype=bool)
 
     def contacts(self, positions, pairs: dict, began: dict):
@@ -236,49 +305,79 @@ class WorldMetrics:
         self.speed = np.where(moved, travelled / self.dt, self.speed)
         self.avoid_turn += np.where(following_policy, np.abs(turned), 0.0)
 
+    def finished(self, time, finished):
+        """Aircraft (N,) bool that finished their plan (a route's last waypoint reached) in
+        the step ending at ``time`` s and left the world: their arrival time. Aircraft taken
+        out otherwise (the env's retired agents) never arrive."""
+        self.arrival[finished] = float(time)
+
     def safety(self, time, positions, velocities, active, following, lookahead_s):
-        """Well clear, induced losses, first alert and arrivals at a step instant (after
+        """Well clear, induced losses and first alert at a step instant (after
         :meth:`contacts` and :meth:`conflicts` of the same instant).
 
         time : s; positions (N, 2) m, velocities (N, 2) m/s, true; active (N,) bool;
         following (N,) bool, flew the CDA policy in the step just flown; lookahead_s : s,
-        the resolver's look-ahead. All unordered pairs of active aircraft (N(N−1)/2 per
-        step, one numba pass, :func:`_pair_scan`).
+        the resolver's look-ahead. Only pairs of active aircraft closer than
+        :func:`pair_reach` (from the fastest active aircraft) can be flagged; they are found
+        on a grid of cells that wide (one numba pass, :func:`_pair_scan`): time and memory
+        O(N log N + pairs in reach), state O(pairs ever flagged).
         """
         first = self._safety_calls == 0
         self._safety_calls += 1
         if self.alerts and math.isnan(self.first_alert):
             self.first_alert = float(time)
-        left = self._was_active & ~active
-        self.arrival[left] = float(time)
-        self._was_active = active.copy()
-        self._active = self._was_active
+        self._active = np.array(active, dtype=bool)
+        n_key = max(self.n, 1)
 
         if not first and self._los_began.size:
-            # pair index in the kernel's order (i < j, row by row) of (a, b), a < b
             a, b = self._los_began[:, 0], self._los_began[:, 1]
-            idx = a * (2 * self.n - a - 1) // 2 + (b - a - 1)
-            fresh = ~self._predicted[idx]
-            self.induced_keys.update(int(k) for k in (a * max(self.n, 1) + b)[fresh])
-        prev, now = self._wcv_now, self._wcv_prev  # reuse the older buffer
-        events, count = _pair_scan(
-            np.ascontiguousarray(positions, dtype=float),
-            np.ascontiguousarray(velocities, dtype=float),
-            np.ascontiguousarray(active, dtype=np.bool_),
-            np.ascontiguousarray(following, dtype=np.bool_),
-            self.dmod**2,
-            self.hmd**2,
-            self.tau_mod,
-            self.r_safe**2,
-            float(lookahead_s),
-            prev,
-            now,
-            self._wcv_ever,
-            self._predicted,
-        )
-        self._wcv_prev, self._wcv_now = prev, now
-        self.wcv_events += events
-        self.wcv_pair_steps += count
+            keys = a * n_key + b
+            fresh = self._predicted.get(keys) < 0
+            self.induced_keys.update(int(k) for k in keys[fresh])
+        pos = np.ascontiguousarray(positions, dtype=float)
+        vel = np.ascontiguousarray(velocities, dtype=float)
+        # non-finite positions fail every test of the pair scan: leave them off the grid
+        ids = np.flatnonzero(self._active & np.isfinite(pos).all(axis=1))
+        wcv = pred = np.zeros(0, dtype=np.int64)
+        if ids.size > 1:
+            speed = np.hypot(vel[ids, 0], vel[ids, 1])
+            speed = speed[np.isfinite(speed)]
+            reach = pair_reach(
+                speed.max() if speed.size else 0.0,
+                self.dmod,
+                self.tau_mod,
+                self.r_safe,
+                float(lookahead_s),
+            )
+            cx = np.floor(pos[ids, 0] / reach).astype(np.int64)
+            cy = np.floor(pos[ids, 1] / reach).astype(np.int64)
+            order = np.lexsort((cy, cx))
+            wcv, pred = _pair_scan(
+                ids[order],
+                cx[order],
+                cy[order],
+                pos,
+                vel,
+                np.ascontiguousarray(following, dtype=np.bool_),
+                n_key,
+                self.dmod**2,
+                self.hmd**2,
+                self.tau_mod,
+                self.r_safe**2,
+                float(lookahead_s),
+            )
+        wcv = np.sort(wcv)
+        prev = self._wcv_prev
+        if prev.size:
+            at = np.minimum(np.searchsorted(prev, wcv), prev.size - 1)
+            began = int(np.count_nonzero(prev[at] != wcv))
+        else:
+            began = int(wcv.size)
+        self._wcv_prev = wcv
+        self._wcv_ever.put(wcv, np.zeros(wcv.size, dtype=np.int64))
+        self._predicted.put(pred, np.zeros(pred.size, dtype=np.int64))
+        self.wcv_events += began
+        self.wcv_pair_steps += int(wcv.size)
 
     def tracking(self, track_pos, true_pos, mode_est=None, mode_true=None):
         """Add (P, 2) estimated vs true positions; optional (Q,) modes to compare."""
@@ -294,7 +393,7 @@ class WorldMetrics:
         """The metrics dict; progress (N,) planned distance covered, m; has_plan (N,) bool."""
         extra = np.where(has_plan, self.flown - np.nan_to_num(progress), 0.0)
         planned = float(np.sum(np.where(has_plan, np.nan_to_num(progress), 0.0)))
-        arrived = has_plan & ~self._active & np.isfinite(self.arrival)
+        arrived = has_plan & np.isfinite(self.arrival)
         with np.errstate(divide="ignore", invalid="ignore"):
             delay = self.arrival[arrived] - np.asarray(progress)[arrived] / self.speed[arrived]
         hours = self.flight_s / 3600.0
@@ -320,7 +419,7 @@ class WorldMetrics:
             "mode_accuracy": self.mode_hits / self.mode_samples if self.mode_samples else math.nan,
             "track_steps": self.track_samples,
             "wcv_events": self.wcv_events,
-            "wcv_pairs": int(np.count_nonzero(self._wcv_ever)),
+            "wcv_pairs": len(self._wcv_ever),
             "wcv_duration_s": self.wcv_pair_steps * self.dt,
             "induced_los_pairs": len(self.induced_keys),
             "flight_hours": hours,

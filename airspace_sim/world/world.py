@@ -263,6 +263,7 @@ class World:
         for members, ap in self.autopilots:
             finished[members] = ap.after_step(state)
         gone = finished & self.active
+        self.metrics_acc.finished(self.time, gone)
         if gone.any():
             self.active[gone] = False
             self.airspace.remove(np.flatnonzero(gone))
