@@ -164,14 +164,20 @@ def table(rows):
             f"| {fmt(med['ours'] / med['mvp'], '{:.2f}')} | {fmt(conf, '{:.0f}')} "
             f"| {fmt(rss, '{:.0f} MB')} |"
         )
-    reps = sorted(
+    counts = sorted(
         {
-            len([r for r in rows if r["n"] == n and r["side"] == "ours"])
+            sum(r["side"] == s and r["n"] == n for r in rows)
             for n in {r["n"] for r in rows}
+            for s in LABELS
         }
+        - {0}
     )
     lines.append("")
-    lines.append(f"Simulated seconds per wall second, medians of {reps} repeats.")
+    lines.append(
+        "Simulated seconds per wall second, medians of "
+        + "/".join(map(str, counts))
+        + " runs per system; ratios are ours over BlueSky's medians."
+    )
     return "\n".join(lines)
 
 
@@ -189,12 +195,17 @@ def main(argv=None):
         help="BlueSky detection method (ON = STATEBASED, numpy; CSTATEBASED: its C++ one)",
     )
     ap.add_argument("--out", help="append the JSON lines to this file too")
+    ap.add_argument("--table", metavar="JSONL", help="only print the table of earlier runs' lines")
     ap.add_argument("--side", choices=["both", "bluesky"], default="both", help=argparse.SUPPRESS)
     ap.add_argument("--traffic", help=argparse.SUPPRESS)
     ap.add_argument("--modes", nargs="+", choices=list(MODES), default=list(MODES))
     args = ap.parse_args(argv)
     if args.side == "bluesky":
         return bluesky_side(args)
+    if args.table:
+        with open(args.table) as f:
+            print(table([json.loads(line) for line in f if line.startswith("{")]))
+        return 0
     rows = []
 
     def emit(row):
