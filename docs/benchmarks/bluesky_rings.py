@@ -41,10 +41,10 @@ import subprocess
 import sys
 import time
 
+import bluesky_driver  # docs/benchmarks/, next to this file (sys.path[0])
 import numpy as np
 
 R_SAFE, NMAC, SPEED, LOOKAHEAD, MARGIN, DT = 3000.0, 152.4, 230.0, 120.0, 0.1, 1.0
-EARTH = 6371000.0  # m, BlueSky's flat-earth radius
 
 
 def ring_traffic(n: int, seed: int, jitter: float = 0.0):
@@ -141,42 +141,12 @@ def run_ours(n, seed, jitter):
 def run_bluesky(n, seed, jitter, hdg_only=False):
     """BlueSky MVP on the ring, true states (module docstring)."""
     import bluesky as bs
-    from bluesky.tools import aero
 
-    if bs.traf is None:
-        bs.init(mode="sim", detached=True)
-    bs.sim.reset()
-    bs.stack.stack(f"DT {DT}")
+    bluesky_driver.reset(DT)
     start, heading, dest, radius, duration = ring_traffic(n, seed, jitter)
-
-    def latlon(p):
-        lat = np.degrees(p[:, 1] / EARTH)
-        return lat, np.degrees(p[:, 0] / (EARTH * np.cos(np.radians(lat))))
-
-    def metres(lat, lon):
-        return np.stack(
-            [EARTH * np.radians(lon) * np.cos(np.radians(lat)), EARTH * np.radians(lat)], 1
-        )
-
-    alt = 20000 * aero.ft
-    cas = float(aero.tas2cas(SPEED, alt))
-    lat, lon = latlon(start)
-    dlat, dlon = latlon(dest)
     ids = [f"R{i}" for i in range(n)]
-    for i, acid in enumerate(ids):
-        hdg = (90.0 - math.degrees(heading[i])) % 360.0  # compass, clockwise from north
-        bs.traf.cre(
-            acid=acid, actype="B744", aclat=lat[i], aclon=lon[i], achdg=hdg, acalt=alt, acspd=cas
-        )
-        bs.stack.stack(f"ADDWPT {acid} {dlat[i]:.8f} {dlon[i]:.8f}")
-    for cmd in (
-        "ASAS ON",
-        "RESO MVP",
-        f"ZONER {R_SAFE / aero.nm:.6f}",
-        f"DTLOOK {LOOKAHEAD}",
-        f"RFACH {1 + MARGIN}",
-    ) + (("RMETHH HDG",) if hdg_only else ()):
-        bs.stack.stack(cmd)
+    bluesky_driver.create(ids, start, heading, dest, SPEED)
+    bluesky_driver.configure_asas(R_SAFE, LOOKAHEAD, MARGIN, "MVP", hdg_only)
     bs.sim.step()  # processes the stack (t = DT)
     tally = Tally(start, dest)
     flying = np.ones(n, dtype=bool)
@@ -189,7 +159,7 @@ def run_bluesky(n, seed, jitter, hdg_only=False):
         live = [bs.traf.id2idx(a) for a in ids]
         for i, k in enumerate(live):
             if k >= 0:
-                pos[i] = metres(bs.traf.lat[k : k + 1], bs.traf.lon[k : k + 1])[0]
+                pos[i] = bluesky_driver.metres(bs.traf.lat[k : k + 1], bs.traf.lon[k : k + 1])[0]
         done = tally.sample(t, pos, flying)
         for i in np.flatnonzero(done):
             bs.stack.stack(f"DEL {ids[i]}")
