@@ -46,7 +46,17 @@ STEPS = 3
 #: minutes; that they load, or are refused, is what is checked).
 MAX_STEPPED_AIRCRAFT = 120
 #: Metrics that are NaN when there is nothing to measure (no tracks, no Markov truth).
-MAY_BE_NAN = {"mode_accuracy", "track_rmse_m"}
+#: metrics that world/metrics.py defines as NaN when undefined (no Markov intruder, no track,
+#: nothing planned covered, nothing flown, no alert, nothing arrived)
+MAY_BE_NAN = {
+    "mode_accuracy",
+    "track_rmse_m",
+    "extra_path_pct",
+    "alerts_per_flight_hour",
+    "first_alert_s",
+    "arrival_delay_mean_s",
+    "arrival_delay_max_s",
+}
 
 EXTREME_NUMBERS = [
     0, -0.0, 0.0, 1, -1, 2, 0.5, -0.5, 1e-3, 5e-324, -5e-324, 1e-300, 1e300, 1e308, -1e308,
