@@ -132,3 +132,19 @@ def check_output(option: str, path, *, folder: bool = False) -> Path:
     except OSError as exc:
         raise UserError(f"{option} {path}: cannot write into {where}: {why(exc)}") from None
     return path
+
+
+def add_set_option(parser, what: str = "") -> None:
+    """``--set KEY=VALUE`` (repeatable, the value parsed as TOML) into ``args.overrides``:
+    the scenario override every command that loads a scenario takes. ``what``: where it
+    applies, appended to the help (e.g. "in every run")."""
+    where = f" {what}" if what else ""
+    parser.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help=f"override a scenario key{where}, e.g. --set traffic.count=64 "
+        "(repeatable; the value is parsed as TOML)",
+    )

@@ -30,7 +30,13 @@ import math
 import time
 from pathlib import Path
 
-from airspace_sim.commands._args import frame_size, non_negative_int, positive_float, positive_int
+from airspace_sim.commands._args import (
+    add_set_option,
+    frame_size,
+    non_negative_int,
+    positive_float,
+    positive_int,
+)
 from airspace_sim.errors import UserError
 
 HELP = "replay recorded flights (OpenSky / traffic files) in the world: alerts, LoS, tracking"
@@ -54,14 +60,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="scenario whose settings and aircraft join the replay (its [recorded] file is "
         "replaced by FILE)",
     )
-    parser.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a scenario key (repeatable; TOML value), e.g. --set sensor.sigma=100",
-    )
+    add_set_option(parser)
     parser.add_argument(
         "--start",
         type=_non_negative_float,

@@ -28,7 +28,14 @@ import sys
 import time
 from pathlib import Path
 
-from airspace_sim.commands._args import check_output, fps, frame_size, positive_int, seed
+from airspace_sim.commands._args import (
+    add_set_option,
+    check_output,
+    fps,
+    frame_size,
+    positive_int,
+    seed,
+)
 from airspace_sim.errors import UserError, escape
 
 HELP = "run a scenario: step the world, print metrics, optionally render frames"
@@ -45,15 +52,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="world steps to run (default: the scenario's duration / dt)",
     )
     parser.add_argument("--seed", type=seed, help="random seed (default: the scenario's seed)")
-    parser.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a scenario key, e.g. --set traffic.count=64 "
-        "(repeatable; the value is parsed as TOML)",
-    )
+    add_set_option(parser)
     parser.add_argument(
         "--render",
         metavar="DIR",

@@ -15,7 +15,7 @@ resumes: finished runs are skipped. Details: ``docs/sweeps.md``.
 
 from __future__ import annotations
 
-from airspace_sim.commands._args import positive_int
+from airspace_sim.commands._args import add_set_option, positive_int
 
 HELP = "run a scenario over a grid of settings x seeds; write parquet, summary, plot"
 
@@ -31,14 +31,7 @@ def add_arguments(parser) -> None:
         "traffic.count=32,64; keys changed together: a,b=[1,2],[3,4]",
     )
     parser.add_argument("--seeds", default="0", help="seeds, e.g. 0-99, 5 or 0,3,7 (default 0)")
-    parser.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a scenario key in every run, e.g. --set duration=120 (repeatable)",
-    )
+    add_set_option(parser, "in every run")
     parser.add_argument(
         "--steps", type=positive_int, help="world steps per run (default: duration / dt)"
     )
