@@ -16,6 +16,7 @@ the project's venv can import it too. Conventions:
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -78,3 +79,18 @@ def configure_asas(r_safe, lookahead, margin, reso="MVP", hdg_only=False, cd="ON
             cmds.append("RMETHH HDG")
     for cmd in cmds:
         bs.stack.stack(cmd)
+
+
+def emitter(rows: list, out: str | None):
+    """A function that keeps a result row in ``rows``, prints it as one JSON line and, with
+    ``out``, appends the line to that file (results survive an interrupted run)."""
+
+    def emit(row: dict) -> None:
+        rows.append(row)
+        line = json.dumps(row)
+        print(line, flush=True)
+        if out:
+            with open(out, "a") as f:
+                f.write(line + "\n")
+
+    return emit

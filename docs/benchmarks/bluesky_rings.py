@@ -236,14 +236,7 @@ def main(argv=None):
                 print(json.dumps(out), flush=True)
         return 0
     rows = []
-
-    def emit(row):
-        rows.append(row)
-        line = json.dumps(row)
-        print(line, flush=True)
-        if args.out:
-            with open(args.out, "a") as f:
-                f.write(line + "\n")
+    emit = bluesky_driver.emitter(rows, args.out)
 
     for n in args.sizes:
         if args.side in ("both", "ours"):

@@ -207,14 +207,7 @@ def main(argv=None):
             print(table([json.loads(line) for line in f if line.startswith("{")]))
         return 0
     rows = []
-
-    def emit(row):
-        rows.append(row)
-        line = json.dumps(row)
-        print(line, flush=True)
-        if args.out:
-            with open(args.out, "a") as f:
-                f.write(line + "\n")
+    emit = bluesky_driver.emitter(rows, args.out)
 
     with tempfile.TemporaryDirectory() as tmp:
         for n in args.sizes:
