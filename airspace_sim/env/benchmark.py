@@ -25,6 +25,7 @@ import re
 import statistics
 import time
 
+import gymnasium
 import numpy as np
 
 
@@ -114,7 +115,7 @@ def bench_env(
 
 
 def _sample(space, rng):
-    if hasattr(space, "n"):
+    if isinstance(space, gymnasium.spaces.Discrete):
         return int(rng.integers(space.n))
     return rng.uniform(-1.0, 1.0, space.shape).astype(np.float32)
 
