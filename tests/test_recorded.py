@@ -277,3 +277,17 @@ def test_real_switzerland_collection():
     s = fl.summary()
     assert s["flights"] > 1000 and s["median_spacing_s"] == 10.0
     assert s["track_vs_course_deg"] < 1.0
+
+
+def test_a_missing_real_extra_is_one_line(monkeypatch):
+    """Without pandas / pyproj (the ``real`` extra) reading is a UserError naming the extra;
+    a None entry in sys.modules makes any import of the module fail (Python's documented
+    way to block one)."""
+    import sys
+
+    from airspace_sim.recorded import _extra
+
+    for module in ("pandas", "pyproj"):
+        monkeypatch.setitem(sys.modules, module, None)
+        with pytest.raises(UserError, match=rf"needs {module}: pip install 'airspace-sim\[real\]'"):
+            _extra.require(module)

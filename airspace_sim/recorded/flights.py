@@ -25,6 +25,7 @@ import numpy as np
 
 from airspace_sim.errors import UserError
 from airspace_sim.geometry import wrap_angle
+from airspace_sim.recorded._extra import require
 
 #: s: a longer silence between two samples of one flight is a gap (no interpolation across
 #: it; the replay takes the aircraft out of the world for its duration). OpenSky's state
@@ -44,7 +45,7 @@ class Frame:
     """
 
     def __init__(self, lat0_deg: float, lon0_deg: float):
-        import pyproj
+        pyproj = require("pyproj")
 
         self.lat0_deg = float(lat0_deg)
         self.lon0_deg = float(lon0_deg)

@@ -39,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from airspace_sim.errors import UserError
+from airspace_sim.recorded._extra import require
 from airspace_sim.recorded.flights import FOOT_M as FOOT
 from airspace_sim.recorded.flights import KNOT_MS as KNOT
 from airspace_sim.recorded.flights import (
@@ -94,7 +95,7 @@ def _suffix(path: Path) -> str:
 
 def _load_table(path: Path):
     """The file as a pandas DataFrame with a 0..n-1 index (row numbers for messages)."""
-    import pandas as pd
+    pd = require("pandas")
 
     if not path.is_file():
         raise UserError(f"{path}: no such file")
@@ -127,7 +128,7 @@ def _where(path: Path, row: int) -> str:
 def _numbers(df, col: str, path: Path, lo=None, hi=None) -> np.ndarray:
     """Column ``col`` as float (NaN where empty); a non-number or a value outside
     ``[lo, hi]`` is a UserError at its first row."""
-    import pandas as pd
+    pd = require("pandas")
 
     raw = df[col]
     vals = pd.to_numeric(raw, errors="coerce").to_numpy(dtype=float)
@@ -151,7 +152,7 @@ def _numbers(df, col: str, path: Path, lo=None, hi=None) -> np.ndarray:
 def _times(df, col: str, path: Path) -> np.ndarray:
     """POSIX seconds (float) of a time column: datetimes, ISO text, or numbers in s or ms
     (numbers above 1e11 are milliseconds: 1e11 s is the year 5138)."""
-    import pandas as pd
+    pd = require("pandas")
 
     raw = df[col]
     if pd.api.types.is_datetime64_any_dtype(raw):
