@@ -177,12 +177,15 @@ def load_plugins() -> list[str]:
             files.add(Path(module_file).resolve())
         loaded.append(f"entry point {ep.name}")
     seen = set(files)
+    # the same plugin installed (site-packages) and in a checkout's plugins/ folder: the
+    # folder's identical copy is the one already loaded; an edited copy is still refused
+    installed = {f.read_bytes() for f in files if f.is_file()}
     for folder in plugin_folders():
         if not folder.is_dir():
             continue
         for path in sorted(folder.glob("*.py")):
             key = path.resolve()
-            if key in seen or path.name.startswith("_"):
+            if key in seen or path.name.startswith("_") or path.read_bytes() in installed:
                 continue
             seen.add(key)
             mod_name = f"airspace_sim_plugin_{path.stem}"
