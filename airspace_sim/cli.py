@@ -19,7 +19,7 @@ import sys
 from airspace_sim.errors import UserError
 
 # Order in which subcommands are listed by --help; any other module found is appended.
-_ORDER = ["run", "sweep", "encounters", "figures", "bench"]
+_ORDER = ["run", "sweep", "risk", "encounters", "figures", "bench"]
 
 
 def _command_modules() -> dict:

@@ -19,7 +19,7 @@ from airspace_sim.tracking.keymap import KeyMap
 from airspace_sim.world import World
 from airspace_sim.world.bodies import LOS, NMAC, RANGE
 from airspace_sim.world.metrics import DMOD_M, HMD_M, TAU_MOD_S, WorldMetrics, pair_reach
-from airspace_sim.world.risk import parse_seeds, risk_ratio
+from airspace_sim.world.risk import risk_ratio
 
 FT = 0.3048
 
@@ -416,7 +416,3 @@ def test_risk_ratio_undefined_without_unequipped_nmac():
     ]
     out = risk_ratio(scene(craft, resolver="bands", duration=30.0), [0])
     assert out["nmac_unequipped"] == 0 and math.isnan(out["risk_ratio"])
-
-
-def test_parse_seeds():
-    assert parse_seeds("0-3,9") == [0, 1, 2, 3, 9]

@@ -7,18 +7,16 @@ runs use resolver ``"none"``, which never turns (it still flags conflicts, so al
 counted alike). NaN when the unequipped runs have no NMAC (the ratio is undefined, not 0).
 The same for losses of separation (``los_ratio``).
 
-    python -m airspace_sim.world.risk dense_random --seeds 0-15
+The command line is ``airspace-sim risk SCENARIO --seeds 0-15`` (:mod:`airspace_sim.commands.risk`).
 """
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
-import json
 import math
-import sys
 
-from airspace_sim.errors import UserError
+#: The per-seed counts, in the order of a row and of the totals.
+COUNTS = ("nmac_equipped", "nmac_unequipped", "los_pairs_equipped", "los_pairs_unequipped")
 
 
 def unequipped(scenario):
@@ -32,85 +30,56 @@ def _ratio(a: int, b: int) -> float:
     return a / b if b else math.nan
 
 
-def risk_ratio(scenario, seeds, progress: bool = False) -> dict:
-    """Run ``scenario`` with its resolver and unequipped on every seed of ``seeds``.
+def seed_counts(scenario, seed: int) -> dict:
+    """One seed's row: ``scenario`` run equipped and unequipped (spawn-safe, top level).
 
-    Returns ``risk_ratio``, ``los_ratio`` (NaN when the denominator is 0), the summed
-    ``nmac_equipped``, ``nmac_unequipped``, ``los_pairs_equipped``, ``los_pairs_unequipped``
-    (NMAC counted as ``nmac_pairs``: each pair once per run), ``runs`` and ``per_seed``: a
-    list of ``{seed, nmac_equipped, nmac_unequipped, los_pairs_equipped,
-    los_pairs_unequipped}``.
-    """
+    NMAC counted as ``nmac_pairs`` and LoS as ``los_pairs``: each pair once per run."""
     from airspace_sim.world import World
 
-    seeds = [int(s) for s in seeds]
-    bare = unequipped(scenario)
-    rows = []
-    it = seeds
-    if progress:
-        from tqdm import tqdm
-
-        it = tqdm(seeds, desc="risk ratio", unit="seed")
-    for seed in it:
-        eq = World(scenario, seed=seed).run()
-        un = World(bare, seed=seed).run()
-        rows.append(
-            {
-                "seed": seed,
-                "nmac_equipped": eq["nmac_pairs"],
-                "nmac_unequipped": un["nmac_pairs"],
-                "los_pairs_equipped": eq["los_pairs"],
-                "los_pairs_unequipped": un["los_pairs"],
-            }
-        )
-    tot = {k: sum(r[k] for r in rows) for k in rows[0]} if rows else {}
-    ne, nu = tot.get("nmac_equipped", 0), tot.get("nmac_unequipped", 0)
-    le, lu = tot.get("los_pairs_equipped", 0), tot.get("los_pairs_unequipped", 0)
+    eq = World(scenario, seed=seed).run()
+    un = World(unequipped(scenario), seed=seed).run()
     return {
-        "risk_ratio": _ratio(ne, nu),
-        "los_ratio": _ratio(le, lu),
-        "nmac_equipped": ne,
-        "nmac_unequipped": nu,
-        "los_pairs_equipped": le,
-        "los_pairs_unequipped": lu,
-        "runs": len(rows),
-        "per_seed": rows,
+        "seed": seed,
+        "nmac_equipped": eq["nmac_pairs"],
+        "nmac_unequipped": un["nmac_pairs"],
+        "los_pairs_equipped": eq["los_pairs"],
+        "los_pairs_unequipped": un["los_pairs"],
     }
 
 
-def parse_seeds(text: str) -> list[int]:
-    """``"0-15"``, ``"0,3,7"`` or a mix (``"0-3,9"``) → list of ints."""
-    out = []
-    try:
-        for part in text.split(","):
-            a, _, b = part.strip().partition("-")
-            out.extend(range(int(a), int(b) + 1) if b else [int(a)])
-    except ValueError:
-        raise UserError(f"--seeds: expected e.g. 0-15 or 0,3,7, got {text!r}") from None
-    return out
+def risk_ratio(scenario, seeds, progress: bool = False, workers: int = 1) -> dict:
+    """Run ``scenario`` with its resolver and unequipped on every seed of ``seeds``, on
+    ``workers`` local processes (1: in this process); the result does not depend on it.
 
+    Returns ``risk_ratio``, ``los_ratio`` (NaN when the denominator is 0), the summed
+    ``nmac_equipped``, ``nmac_unequipped``, ``los_pairs_equipped``, ``los_pairs_unequipped``,
+    ``runs`` and ``per_seed``: a list, in the order of ``seeds``, of :func:`seed_counts`
+    rows ``{seed, nmac_equipped, nmac_unequipped, los_pairs_equipped, los_pairs_unequipped}``.
+    ``progress``: a tqdm bar on stderr, one tick per seed.
+    """
+    import sys
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(
-        prog="python -m airspace_sim.world.risk",
-        description="NMACs (and LoS pairs) with the scenario's resolver over those without "
-        "it (resolver 'none'), on the same seeds. Prints one JSON object.",
+    from tqdm import tqdm
+
+    from airspace_sim.experiments import LocalBackend
+
+    seeds = [int(s) for s in seeds]
+    rows: list = [None] * len(seeds)
+    bar = tqdm(
+        total=len(seeds), desc="risk ratio", unit="seed", disable=not progress, file=sys.stderr
     )
-    ap.add_argument("scenario", help="scenario name (scenarios/) or TOML path")
-    ap.add_argument("--seeds", default="0-9", help="seeds, e.g. 0-15 or 0,3,7 (default 0-9)")
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
-    args = ap.parse_args(argv)
-    from airspace_sim.scenarios import load
-
     try:
-        sc = load(args.scenario, args.set)
-        out = risk_ratio(sc, parse_seeds(args.seeds), progress=True)
-    except UserError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    print(json.dumps(out))
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+        with LocalBackend(workers) as backend:
+            for i, row in backend.imap(seed_counts, [(scenario, s) for s in seeds]):
+                rows[i] = row
+                bar.update(1)
+    finally:
+        bar.close()
+    tot = {k: sum(r[k] for r in rows) for k in COUNTS}
+    return {
+        "risk_ratio": _ratio(tot["nmac_equipped"], tot["nmac_unequipped"]),
+        "los_ratio": _ratio(tot["los_pairs_equipped"], tot["los_pairs_unequipped"]),
+        **tot,
+        "runs": len(rows),
+        "per_seed": rows,
+    }
