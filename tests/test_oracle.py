@@ -11,19 +11,11 @@ from airspace_sim.avoidance.oracle import (
     best_plan,
     common_plan,
     fly,
+    fly_in_world,
     manoeuvre_family,
     priority_plan,
 )
 from airspace_sim.geometry import coordinated_turn_positions
-from airspace_sim.scenarios.schema import (
-    AircraftSpec,
-    ResolverSpec,
-    Scenario,
-    SensorSpec,
-    Separation,
-    TrackerSpec,
-)
-from airspace_sim.world import World
 
 V, RATE, R_SAFE = 230.0, math.radians(3.0), 3000.0
 SMALL = manoeuvre_family(t0_s=(0, 20), offsets_deg=(20, 30, 45), hold_s=(40, 60, 80, 100, 120))
@@ -58,42 +50,19 @@ def test_traffic_without_conflicts_flies_straight():
 
 
 def _world_replay(plan, start, heading, dest):
-    """Fly plan.turn_rates in the World (controlled aircraft on one-waypoint routes)."""
-    specs = [
-        AircraftSpec(
-            id=f"a{i}",
-            position=tuple(start[i]),
-            heading_deg=math.degrees(heading[i]),
-            speed=V,
-            autopilot="route",
-            waypoints=[tuple(dest[i])],
-            controlled=True,
-        )
-        for i in range(len(start))
-    ]
-    steps = plan.turn_rates.shape[1]
-    sc = Scenario(
-        name="oracle",
-        seed=0,
-        dt=1.0,
-        duration=float(steps),
-        separation=Separation(r_safe=R_SAFE),
-        sensor=SensorSpec(range=40000.0, sigma=50.0),
-        tracker=TrackerSpec(kind="truth"),
-        resolver=ResolverSpec(kind="none", lookahead=120.0),
-        aircraft=specs,
-    )
-    w = World(sc)
+    """Fly the plan in the World; the World's metrics and the least distance between any
+    two flying aircraft at any step instant (brute force over the positions)."""
     min_d = math.inf
-    for k in range(steps):
-        if w.done:
-            break
-        w.step(plan.turn_rates[:, k])
+
+    def observe(w):
+        nonlocal min_d
         idx = np.flatnonzero(w.active)
         if idx.size > 1:
             d = np.hypot(*(w.positions[idx, None] - w.positions[None, idx]).transpose(2, 0, 1))
             min_d = min(min_d, d[np.triu_indices(idx.size, 1)].min())
-    return w.metrics(), min_d
+
+    m = fly_in_world(plan, start, heading, dest, V, RATE, R_SAFE, after_step=observe)
+    return m, min_d
 
 
 @pytest.mark.parametrize("planner", [common_plan, priority_plan])

@@ -21,8 +21,7 @@ it for ``T`` seconds, then turn back direct to the destination. Two planners sea
   the cheapest member that keeps every pair clear.
 
 :func:`best_plan` runs both and keeps the cheaper conflict-free plan. ``plan.turn_rates``
-(N, S) can be flown in the world by controlled aircraft to check it
-(``tests/test_oracle.py``). Units: metres, seconds, radians CCW from east.
+(N, S) is flown in the world by controlled aircraft to check it (:func:`fly_in_world`). Units: metres, seconds, radians CCW from east.
 """
 
 from __future__ import annotations
@@ -297,3 +296,61 @@ def best_plan(
         if p.feasible and p.extra_pct < best.extra_pct:
             best = p
     return best
+
+
+def fly_in_world(
+    plan: Plan, start, heading, dest, speed, max_rate, r_safe, dt=1.0, after_step=None
+) -> dict:
+    """Fly ``plan.turn_rates`` in the :class:`~airspace_sim.world.World` and return its
+    :meth:`~airspace_sim.world.World.metrics`: the check that a plan is what the world
+    flies (its LoS pairs, extra path and arrivals are the world's, not the planner's).
+
+    The aircraft are controlled (RL-agent) aircraft on one-waypoint routes from ``start``
+    (N, 2) m on ``heading`` (N,) rad (or one for all) to ``dest`` (N, 2) m at ``speed``
+    m/s with the turn limit ``max_rate`` rad/s; tracker ``truth`` and resolver ``none``,
+    separation ``r_safe`` m, step ``dt`` s; step ``k`` flies column ``k`` of
+    ``plan.turn_rates`` (N, S), until every aircraft has arrived. ``after_step(world)``,
+    if given, is called after every step (e.g. to measure the separation independently).
+    """
+    from airspace_sim.scenarios.schema import (
+        AircraftSpec,
+        ResolverSpec,
+        Scenario,
+        Separation,
+        TrackerSpec,
+    )
+    from airspace_sim.world import World
+
+    start, dest = np.asarray(start, float), np.asarray(dest, float)
+    heading = np.broadcast_to(np.asarray(heading, float), (len(start),))
+    specs = [
+        AircraftSpec(
+            id=f"a{i}",
+            position=(float(start[i, 0]), float(start[i, 1])),
+            heading_deg=math.degrees(heading[i]),
+            speed=float(speed),
+            autopilot="route",
+            waypoints=[(float(dest[i, 0]), float(dest[i, 1]))],
+            controlled=True,
+            max_turn_rate_deg=math.degrees(max_rate),
+        )
+        for i in range(len(start))
+    ]
+    steps = plan.turn_rates.shape[1]
+    scenario = Scenario(
+        name="oracle plan",
+        dt=float(dt),
+        duration=steps * float(dt),
+        separation=Separation(r_safe=float(r_safe)),
+        tracker=TrackerSpec(kind="truth"),
+        resolver=ResolverSpec(kind="none"),
+        aircraft=specs,
+    )
+    world = World(scenario)
+    for k in range(steps):
+        if world.done:
+            break
+        world.step(plan.turn_rates[:, k])
+        if after_step is not None:
+            after_step(world)
+    return world.metrics()

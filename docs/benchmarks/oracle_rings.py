@@ -5,8 +5,8 @@ against a centralised, perfect-knowledge plan (:mod:`airspace_sim.avoidance.orac
 
 The ring is :func:`bluesky_rings.ring_traffic` (the same as ``ring_scenario``: radius 20 km
 at these sizes, 230 m/s, 3°/s, r_safe 3000 m). The oracle's plan is flown in the World by
-controlled aircraft (tracker ``truth``, no resolver) to check it: its LoS pairs must be 0
-and its extra path is the World's ``extra_path_pct``. Ours: ``ring_scenario`` (IMM tracks
+controlled aircraft (``oracle.fly_in_world``: tracker ``truth``, no resolver) to check it:
+its LoS pairs must be 0 and its extra path is the World's ``extra_path_pct``. Ours: ``ring_scenario`` (IMM tracks
 from σ = 50 m, ``bands``, margin 10%), seeds as given, and the same with perfect tracks
 (``tracker = "truth"``). Prints JSON lines, then a Markdown table.
 """
@@ -25,35 +25,11 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from bluesky_rings import R_SAFE, SPEED, parse_seeds, ring_traffic  # noqa: E402
 
-from airspace_sim.avoidance.oracle import best_plan  # noqa: E402
-from airspace_sim.scenarios.schema import AircraftSpec  # noqa: E402
+from airspace_sim.avoidance.oracle import best_plan, fly_in_world  # noqa: E402
 from airspace_sim.world import World  # noqa: E402
 from airspace_sim.world.benchmark import ring_scenario  # noqa: E402
 
 RATE = math.radians(3.0)
-
-
-def replay(plan, n, start, heading, dest, duration):
-    """World metrics of the plan flown by controlled aircraft (resolver none, truth)."""
-    specs = [
-        AircraftSpec(
-            id=f"o{i}",
-            position=tuple(start[i]),
-            heading_deg=math.degrees(heading[i]),
-            speed=SPEED,
-            autopilot="route",
-            waypoints=[tuple(dest[i])],
-            controlled=True,
-        )
-        for i in range(n)
-    ]
-    sc = ring_scenario(n, tracker="truth", resolver="none", duration=duration)
-    w = World(sc, aircraft=specs)
-    for k in range(plan.turn_rates.shape[1]):
-        if w.done:
-            break
-        w.step(plan.turn_rates[:, k])
-    return w.metrics()
 
 
 def ours(n, seed, tracker):
@@ -80,7 +56,7 @@ def main(argv=None):
         t0 = time.perf_counter()
         plan = best_plan(start, heading, dest, SPEED, RATE, R_SAFE, duration, orders=args.orders)
         wall = time.perf_counter() - t0
-        m = replay(plan, n, start, heading, dest, duration)
+        m = fly_in_world(plan, start, heading, dest, SPEED, RATE, R_SAFE)
         t0_, d, T = plan.params[0]
         row = {
             "n": n,
