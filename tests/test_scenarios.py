@@ -642,3 +642,36 @@ def test_validate_params_is_generic():
         loader.validate_params(Params, {"mode": "c"}, "t")
     with pytest.raises(UserError, match=r"^t\.x: unknown key, got 1 \(known: sigma_accel, mode\)"):
         loader.validate_params(Params, {"x": 1}, "t")
+
+
+@pytest.mark.parametrize(
+    "recorded, expected",
+    [
+        (
+            {"velocity": "bogus"},
+            "recorded.velocity: expected one of reported, positions, got 'bogus'",
+        ),
+        ({"centre_lat_deg": 47.0}, "recorded.centre_lon_deg: expected it with recorded.centre_lat"),
+        ({"centre_lon_deg": 8.0}, "recorded.centre_lat_deg: expected it with recorded.centre_lon"),
+        ({"centre_lat_deg": 91.0, "centre_lon_deg": 8.0}, "recorded.centre_lat_deg: expected a"),
+        ({"max_gap_s": 0.0}, "recorded.max_gap_s: expected a positive number"),
+        (
+            {"min_altitude_ft": 5000.0, "max_altitude_ft": 1000.0},
+            "recorded.max_altitude_ft: expected at least recorded.min_altitude_ft (5000 ft), "
+            "got 1000",
+        ),
+    ],
+)
+def test_recorded_rules_are_the_loaders(recorded, expected):
+    """Every rule of a [recorded] value is the loader's, at load time: the file (which does
+    not exist) is never looked at; recorded/scenario.py checks only what needs the file."""
+    from airspace_sim.recorded.scenario import load_flights
+
+    data = {"name": "r", "recorded": {"file": "no-such.csv", **recorded}}
+    with pytest.raises(UserError) as info:
+        from_dict(data, source="r.toml")
+    assert str(info.value).startswith("r.toml: ") and expected in str(info.value), info.value
+    assert "\n" not in str(info.value)
+    ok = from_dict({"name": "r", "recorded": {"file": "no-such.csv", "max_altitude_ft": 5000.0}})
+    with pytest.raises(UserError, match=r"recorded\.file: no such file"):
+        load_flights(ok.recorded)

@@ -54,28 +54,15 @@ def _read_cached(path: str, mtime: float, centre, max_gap_s: float, velocity: st
 
 def load_flights(spec, source: str = "<memory>") -> Flights:
     """The :class:`Flights` of a :class:`~airspace_sim.scenarios.schema.RecordedSpec`
-    (read once per file, frame, gap and velocity source: Flights are immutable), with its ``flights``,
-    altitude and ``max_gap_s`` selections applied."""
+    (read once per file, frame, gap and velocity source: Flights are immutable), with its
+    ``flights``, altitude and ``max_gap_s`` selections applied. ``spec`` is one the scenario
+    loader validated (:data:`airspace_sim.scenarios.loader.RANGES` and
+    :func:`~airspace_sim.scenarios.loader.check_scenario` hold its rules); only what needs
+    the file is checked here."""
     path = resolve_file(spec.file, source)
     centre = None
-    if (spec.centre_lat_deg is None) != (spec.centre_lon_deg is None):
-        raise UserError(f"{source}: recorded: give both centre_lat_deg and centre_lon_deg or none")
     if spec.centre_lat_deg is not None:
-        if not (-90 <= spec.centre_lat_deg <= 90 and -180 <= spec.centre_lon_deg <= 180):
-            raise UserError(
-                f"{source}: recorded.centre_lat_deg/centre_lon_deg: off the globe, got "
-                f"{spec.centre_lat_deg}, {spec.centre_lon_deg}"
-            )
         centre = (float(spec.centre_lat_deg), float(spec.centre_lon_deg))
-    if not spec.max_gap_s > 0:
-        raise UserError(f"{source}: recorded.max_gap_s: expected > 0, got {spec.max_gap_s}")
-    from airspace_sim.recorded.readers import VELOCITY_SOURCES
-
-    if spec.velocity not in VELOCITY_SOURCES:
-        raise UserError(
-            f"{source}: recorded.velocity: expected one of {', '.join(VELOCITY_SOURCES)}, "
-            f"got {spec.velocity!r}"
-        )
     flights = _read_cached(
         str(path.resolve()), path.stat().st_mtime, centre, spec.max_gap_s, spec.velocity
     )

@@ -103,6 +103,12 @@ def _preset_names():
     return sorted(PRESETS)
 
 
+def _velocity_sources():
+    from airspace_sim.recorded.readers import VELOCITY_SOURCES
+
+    return VELOCITY_SOURCES
+
+
 def _range(
     lo: float | None = None,
     hi: float | None = None,
@@ -238,6 +244,7 @@ RANGES: dict[str, Callable[[Any], str | None]] = {
     "RecordedSpec.min_altitude_ft": _range(-2000.0, 100_000.0, unit="ft"),
     "RecordedSpec.max_altitude_ft": _range(-2000.0, 100_000.0, unit="ft"),
     "RecordedSpec.max_gap_s": _range(0, MAX_TIME_S, lo_open=True, unit="s"),
+    "RecordedSpec.velocity": _one_of(_velocity_sources),
     "TrafficSpec.pattern": _one_of(TRAFFIC_PATTERNS),
     "TrafficSpec.count": _range(0, MAX_AIRCRAFT, integer=True),
     "TrafficSpec.radius": _range(0, MAX_DISTANCE_M, lo_open=True, unit="m"),
@@ -548,6 +555,20 @@ def check_scenario(sc: Scenario) -> None:
         raise Invalid(
             "traffic.pattern",
             "expected an aircraft[0] (the ownship) for pattern 'encounter', got none",
+        )
+    r = sc.recorded
+    if (r.centre_lat_deg is None) != (r.centre_lon_deg is None):
+        given, missing = ("lat", "lon") if r.centre_lon_deg is None else ("lon", "lat")
+        raise Invalid(
+            f"recorded.centre_{missing}_deg",
+            f"expected it with recorded.centre_{given}_deg (the frame centre needs both, or "
+            "neither for the data's centre), got none",
+        )
+    if None not in (r.min_altitude_ft, r.max_altitude_ft) and r.max_altitude_ft < r.min_altitude_ft:
+        raise Invalid(
+            "recorded.max_altitude_ft",
+            f"expected at least recorded.min_altitude_ft ({r.min_altitude_ft:g} ft), "
+            f"got {r.max_altitude_ft:g}",
         )
 
 
