@@ -1,6 +1,7 @@
 """Sweeps: grid parsing, rows equal to the worlds run directly, any worker count, resume, CLI."""
 
 import math
+import os
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -10,6 +11,7 @@ from scipy import stats
 
 from airspace_sim import cli
 from airspace_sim.errors import UserError
+from airspace_sim.experiments import LocalBackend
 from airspace_sim.experiments.summary import format_summary, mean_ci, summarize
 from airspace_sim.experiments.sweep import (
     grid_keys,
@@ -23,6 +25,7 @@ from airspace_sim.scenarios import load
 from airspace_sim.world import World
 
 STEPS = 40
+THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
 GRID = ["resolver.kind=bands,none", "sensor.sigma=30,80.5"]
 SET = ["duration=60"]
 
@@ -101,10 +104,14 @@ def test_rows_are_the_worlds_run_directly(reference):
     assert len({r["track_rmse_m"] for r in rows}) > 1  # seeds and settings matter
 
 
-def test_two_workers_and_resume_give_the_same_rows(tmp_path, reference):
+def test_two_workers_and_resume_give_the_same_rows(tmp_path, reference, monkeypatch):
+    for var in THREAD_VARS:  # unset, as for most users: the workers' "1" must not leak here
+        monkeypatch.delenv(var, raising=False)
+    environ = dict(os.environ)
     two = run_sweep(
         "head_on", GRID, "0-2", tmp_path / "k2.parquet", SET, steps=STEPS, workers=2, progress=False
     )
+    assert dict(os.environ) == environ  # the parent's environment is unchanged
     assert same_rows(two, reference)
     assert same_rows(pq.read_table(tmp_path / "k2.parquet"), reference)
     # an interrupted sweep (fewer seeds, one resolver) resumed with the full grid
@@ -126,6 +133,17 @@ def test_two_workers_and_resume_give_the_same_rows(tmp_path, reference):
     after = {p.name: p.stat().st_mtime_ns for p in parts.glob("part-*.parquet")}
     assert all(after[n] == t for n, t in before.items())  # finished runs not run again
     assert len(after) == 12
+
+
+def test_workers_get_one_thread_each_or_the_users_setting(monkeypatch):
+    for var in THREAD_VARS:
+        monkeypatch.delenv(var, raising=False)
+    monkeypatch.setenv("OMP_NUM_THREADS", "3")  # the user's choice is passed on
+    environ = dict(os.environ)
+    with LocalBackend(2) as backend:
+        seen = dict(backend.imap(os.getenv, [(v,) for v in THREAD_VARS]))
+    assert [seen[i] for i in range(len(THREAD_VARS))] == ["3", "1", "1", "1"]
+    assert dict(os.environ) == environ
 
 
 def test_resume_with_another_scenario_setting_is_refused(tmp_path):

@@ -31,9 +31,24 @@ BACKENDS = ("local", "ray")
 _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
 
 
+def worker_env() -> dict[str, str]:
+    """The thread variables a worker gets (local process or Ray task, on this machine or a
+    cluster's): this process's value where the user set one, else ``"1"``. Only the workers
+    get them: this process's environment is never changed."""
+    return {v: os.environ.get(v, "1") for v in _THREAD_VARS}
+
+
+def _init_worker(parent_pid: int, env: dict[str, str]) -> None:
+    """Worker initializer: ``env`` into this worker's environment (before the unit's
+    function, and with it numpy and numba, is imported: they read the thread variables
+    when loaded), then :func:`_watch_parent`."""
+    os.environ.update(env)
+    _watch_parent(parent_pid)
+
+
 def _watch_parent(parent_pid: int, period_s: float = 0.2) -> None:
-    """Worker initializer: exit this process as soon as ``parent_pid`` is no longer its
-    parent (it died and the worker was re-parented)."""
+    """Exit this process as soon as ``parent_pid`` is no longer its parent (it died and
+    the worker was re-parented)."""
 
     def watch():
         while os.getppid() == parent_pid:
@@ -68,8 +83,6 @@ class LocalBackend:
             return
         from concurrent.futures.process import BrokenProcessPool
 
-        for var in _THREAD_VARS:
-            os.environ.setdefault(var, "1")
         todo = dict(enumerate(args))
         for attempt in range(self.max_retries + 1):
             try:
@@ -96,8 +109,8 @@ class LocalBackend:
         self._pool = ProcessPoolExecutor(
             max_workers=min(self.workers, len(todo)),
             mp_context=mp.get_context("spawn"),
-            initializer=_watch_parent,
-            initargs=(os.getpid(),),
+            initializer=_init_worker,
+            initargs=(os.getpid(), worker_env()),
         )
         pending = {self._pool.submit(fn, *a): i for i, a in todo.items()}
         self._procs = [p for p in mp.active_children() if p not in before]
@@ -146,7 +159,7 @@ class RayBackend:
 
             # the workers load the same plugins as this process (Ray workers' cwd differs)
             folders = [str(p.resolve()) for p in registry.plugin_folders() if p.is_dir()]
-            env = {v: "1" for v in _THREAD_VARS}
+            env = worker_env()
             if folders:
                 env["AIRSPACE_SIM_PLUGINS"] = os.pathsep.join(folders)
             kwargs = dict(
