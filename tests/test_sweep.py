@@ -153,6 +153,32 @@ def test_resume_with_another_scenario_setting_is_refused(tmp_path):
         run_sweep("head_on", [], "0", out, ["duration=61"], steps=3, progress=False)
 
 
+def test_resume_with_a_changed_recording_is_refused(tmp_path):
+    """The manifest holds the SHA-256 of the [recorded] file: the same scenario text over
+    a changed recording is other rows, refused with the manifest's one line."""
+    pytest.importorskip("pandas")
+    pytest.importorskip("pyproj")
+    from test_replay import _crossing
+    from test_replay_files import _write_csv
+
+    a, b = _crossing()
+    _write_csv(tmp_path / "f.csv", [a, b])
+    (tmp_path / "rec.toml").write_text(
+        'name = "rec"\nduration = 100\n[recorded]\nfile = "f.csv"\nvelocity = "positions"\n'
+    )
+    out = tmp_path / "r.parquet"
+    first = run_sweep(tmp_path / "rec.toml", [], "0", out, steps=3, progress=False)
+    assert first.num_rows == 1 and first.column("aircraft").to_pylist() == [2]
+    again = run_sweep(tmp_path / "rec.toml", [], "0-1", out, steps=3, progress=False)
+    assert again.num_rows == 2  # unchanged recording: resumes
+    _write_csv(tmp_path / "f.csv", [a])  # one flight fewer
+    with pytest.raises(UserError) as info:
+        run_sweep(tmp_path / "rec.toml", [], "0-1", out, steps=3, progress=False)
+    msg = str(info.value)
+    assert "\n" not in msg and "made with a different recorded_sha256" in msg, msg
+    assert f"use another --out or delete {out}.parts" in msg
+
+
 def test_bad_grid_value_is_named_before_any_work(tmp_path):
     out = tmp_path / "bad.parquet"
     with pytest.raises(UserError, match=r"^--grid traffic.count=-3") as e:

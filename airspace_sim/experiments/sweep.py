@@ -15,8 +15,10 @@ every metric of :meth:`World.run() <airspace_sim.world.World.run>`. The run key 
 keyed by seed), so rows are identical for any worker count or backend. Rows are sorted by
 cell (grid order), then seed.
 
-The manifest holds the scenario's text (SHA-256), the base overrides and ``steps``: a
-resumed sweep with more seeds or more grid values reuses every run it already has.
+The manifest holds the scenario's text (SHA-256), the base overrides, ``steps`` and, when a
+cell replays recorded traffic, the SHA-256 of every ``[recorded]`` file the cells refer to
+(``recorded_sha256``, file value -> digest): a resumed sweep with more seeds or more grid
+values reuses every run it already has, and one whose recording changed is refused.
 """
 
 from __future__ import annotations
@@ -257,6 +259,21 @@ def row_table(row: dict, kinds: dict):
     return pa.table({k: [v] for k, v in row.items()}, schema=pa.schema(fields))
 
 
+def _file_sha256(file: str, source: str) -> str:
+    """SHA-256 (hex) of the bytes of the ``[recorded] file`` value ``file`` of ``source``."""
+    from airspace_sim.recorded.scenario import resolve_file
+
+    path = resolve_file(file, source)
+    h = hashlib.sha256()
+    try:
+        with open(path, "rb") as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                h.update(block)
+    except OSError as exc:
+        raise UserError(f"{source}: recorded.file: cannot read {path}: {exc.strerror}") from None
+    return h.hexdigest()
+
+
 def _part_name(run: Run) -> str:
     h = hashlib.sha1(settings_text(run.settings).encode()).hexdigest()[:12]
     return f"{h}-s{run.seed}"
@@ -316,11 +333,14 @@ def run_sweep(
     runs = plan(axes, seed_list)
     kinds = column_types(axes)
     seen_cells = set()
+    recorded = {}  # [recorded] file value -> SHA-256 of its bytes
     for r in runs:  # every cell valid before any work: errors come first, on one line
         if r.cell not in seen_cells:
             seen_cells.add(r.cell)
             sc = load_cell(text, source, path.stem, base, r.settings)
             build_aircraft(sc, np.random.default_rng(0))  # traffic-level checks (ring radius)
+            if sc.recorded.file and sc.recorded.file not in recorded:
+                recorded[sc.recorded.file] = _file_sha256(sc.recorded.file, sc.source)
     manifest = {
         "kind": "sweep",
         "scenario": path.stem,
@@ -328,6 +348,8 @@ def run_sweep(
         "overrides": base,
         "steps": steps,
     }
+    if recorded:  # absent without recorded traffic: earlier sweeps' manifests still match
+        manifest["recorded_sha256"] = recorded
     store = PartStore(out, KEY_COLUMNS, manifest)
     done = store.open()
     units = [
