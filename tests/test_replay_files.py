@@ -150,3 +150,49 @@ def test_cli_run_waits_for_recorded_traffic_that_arrives_later(tmp_path, capsys)
     assert s["steps"] == 300 and not s["all_left"]  # the duration, not the gap, ended it
     assert s["metrics"]["flight_hours"] == pytest.approx(201 / 3600, abs=2 / 3600)
     assert s["checkpoint"] == str(ckpt)  # in the file as on the screen
+
+
+def test_sigterm_ends_a_replay_like_ctrl_c_with_its_outputs_written(tmp_path):
+    """A real SIGTERM mid-replay: exit 143 and one line, like ``run``; the steps so far are
+    summarised in --json, and the frames and the GIF are written."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    from PIL import Image
+
+    t = np.arange(0.0, 40001.0, 10.0)  # 11 hours: far longer than the test waits
+    _write_csv(
+        tmp_path / "f.csv", [_line("A", (0.0, 0.0), 0.0, t), _line("B", (0.0, 9000.0), 0.0, t)]
+    )
+    out, frames = tmp_path / "s.json", tmp_path / "frames"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "airspace_sim", "replay", str(tmp_path / "f.csv")]
+        + ["--velocity", "positions", "--json", str(out), "--render", str(frames)]
+        + ["--every", "20", "--size", "64x64", "--gif", "--quiet"],
+        cwd=Path(__file__).resolve().parent.parent,
+        env={**os.environ, "AIRSPACE_SIM_PLUGINS": ""},
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while len(list(frames.glob("*.png"))) < 3:  # stepping: frames after the first
+            assert proc.poll() is None and time.monotonic() < deadline, proc.stderr
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 143, err
+    assert err.strip() == "airspace-sim replay: terminated"
+    s = json.loads(out.read_text())
+    assert s["interrupted"] and 40 <= s["steps"] < 40000, s["steps"]
+    assert s["metrics"]["aircraft"] == 2 and s["replay"]["los_pairs"] == 0  # 9 km apart
+    pngs = sorted(frames.glob("*.png"))
+    assert s["frames"] == len(pngs) >= 3
+    with Image.open(frames / "run.gif") as gif:
+        assert gif.n_frames == len(pngs)

@@ -157,8 +157,13 @@ def build_scenario(args):
 
 
 def run(args) -> int:
+    """Replay; on Ctrl-C or SIGTERM (exit 130 / 143, like ``run``) the steps so far are
+    summarised, ``--json`` and ``--render`` (frames, video) written, then the run ends."""
+    from airspace_sim.commands._args import check_output
     from airspace_sim.commands.run import (
         Frames,
+        Terminated,
+        _SigtermFlag,
         format_table,
         jsonable,
         step_world,
@@ -172,6 +177,10 @@ def run(args) -> int:
         raise UserError(
             f"--{'gif' if args.gif else 'mp4'} needs --render DIR (the frames go there)"
         )
+    if args.json:  # before the replay, not after it ran
+        check_output("--json", args.json)
+    if args.render:
+        check_output("--render", args.render, folder=True)
     sc = build_scenario(args)
     seed = sc.seed if args.seed is None else args.seed
     t_build = time.perf_counter()
@@ -190,41 +199,52 @@ def run(args) -> int:
         )
         frames.add(first)
     steps = sc.n_steps
-    t0, cpu0 = time.perf_counter(), time.process_time()
-    stopped = step_world(
-        world, steps, sc.name, args.quiet, frames, args.every, after_step=lambda k: stats.observe()
-    )
-    interrupted = stopped is not None
-    wall = time.perf_counter() - t0
-    cpu = time.process_time() - cpu0  # this process's CPU s: on a shared machine wall
-    # time also counts the waits for a core
-    video_path = frames.close() if frames is not None else None
-    summary = {
-        "scenario": sc.name,
-        "source": sc.source,
-        "file": sc.recorded.file,
-        "seed": seed,
-        "overrides": list(args.overrides),
-        "start_s": sc.recorded.start_s,
-        "steps": world.step_count,
-        "dt": float(world.dt),
-        "simulated_time": float(world.time),
-        "wall_time": round(wall, 3),
-        "build_time": round(build_s, 3),
-        "steps_per_second": round(world.step_count / wall, 1) if wall > 0 else None,
-        "real_time_factor": round(world.time / wall, 1) if wall > 0 else None,
-        "cpu_time": round(cpu, 3),
-        "real_time_factor_cpu": round(world.time / cpu, 1) if cpu > 0 else None,
-        "interrupted": interrupted,
-        "replay": jsonable(stats.report()),
-        "metrics": jsonable(world.metrics()),
-    }
-    write_summary(args, summary, frames, video_path)
-    if not args.quiet:
-        both = {"replay": summary["replay"], "world": summary["metrics"]}
-        print(format_table({**summary, "metrics": both}))
-        if frames is not None:
-            print(f"\n{len(frames.paths)} frames in {frames.directory}")
-    if stopped is not None:
-        raise stopped
+    # SIGTERM only sets a flag, checked between steps: the replay stops as on Ctrl-C; one
+    # that comes while the outputs are written waits for them, then ends the replay
+    with _SigtermFlag() as sigterm:
+        t0, cpu0 = time.perf_counter(), time.process_time()
+        stopped = step_world(
+            world,
+            steps,
+            sc.name,
+            args.quiet,
+            frames,
+            args.every,
+            sigterm,
+            after_step=lambda k: stats.observe(),
+        )
+        wall = time.perf_counter() - t0
+        cpu = time.process_time() - cpu0  # this process's CPU s: on a shared machine wall
+        # time also counts the waits for a core
+        video_path = frames.close() if frames is not None else None
+        summary = {
+            "scenario": sc.name,
+            "source": sc.source,
+            "file": sc.recorded.file,
+            "seed": seed,
+            "overrides": list(args.overrides),
+            "start_s": sc.recorded.start_s,
+            "steps": world.step_count,
+            "dt": float(world.dt),
+            "simulated_time": float(world.time),
+            "wall_time": round(wall, 3),
+            "build_time": round(build_s, 3),
+            "steps_per_second": round(world.step_count / wall, 1) if wall > 0 else None,
+            "real_time_factor": round(world.time / wall, 1) if wall > 0 else None,
+            "cpu_time": round(cpu, 3),
+            "real_time_factor_cpu": round(world.time / cpu, 1) if cpu > 0 else None,
+            "interrupted": stopped is not None,
+            "replay": jsonable(stats.report()),
+            "metrics": jsonable(world.metrics()),
+        }
+        write_summary(args, summary, frames, video_path)
+        if not args.quiet:
+            both = {"replay": summary["replay"], "world": summary["metrics"]}
+            print(format_table({**summary, "metrics": both}))
+            if frames is not None:
+                print(f"\n{len(frames.paths)} frames in {frames.directory}")
+        if stopped is not None:
+            raise stopped
+        if sigterm.received:
+            raise Terminated
     return 0
