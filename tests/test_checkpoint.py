@@ -73,8 +73,12 @@ def test_foreign_damaged_or_tampered_files_are_refused_before_unpickling(
         "empty.ckpt": (b"", "not an airspace-sim checkpoint"),
         "a-pickle.pkl": (evil, "not an airspace-sim checkpoint"),
         "format2.ckpt": (
-            good.replace(b"format 3\n", b"format 2\n", 1),
-            "checkpoint format 2, this airspace-sim reads format 3",
+            good.replace(b"format 4\n", b"format 2\n", 1),
+            "checkpoint format 2, this airspace-sim reads format 4 (written by an older",
+        ),
+        "format9.ckpt": (
+            good.replace(b"format 4\n", b"format 9\n", 1),
+            "checkpoint format 9, this airspace-sim reads format 4 (written by a newer",
         ),
         "no-mac.ckpt": (magic + fmt + b"{}\n", "damaged checkpoint header (no mac line)"),
         "truncated.ckpt": (good[: len(good) // 2], "truncated or damaged checkpoint"),
@@ -259,6 +263,31 @@ def test_a_real_full_device_is_one_line_and_keeps_the_checkpoint(tmp_path, monke
     )
     assert_one_line_error(proc, "cannot write /dev/full", "[Errno 28]")
     assert checkpoint.load(Path("c.ckpt"))[0].step_count == 3
+
+
+def test_a_format_3_checkpoint_from_before_world_retired_is_refused_in_one_line(
+    tmp_path, monkeypatch, capsys
+):
+    """Format 3 worlds have no ``World.retired``: they would resume (with only a code
+    warning) and fail on recorded traffic. A format-3 file as that code wrote it, signed
+    with this user's key so that only its version can stop it, is refused before unpickling."""
+    monkeypatch.chdir(tmp_path)
+    good = _good(tmp_path, capsys)
+    _, _, _, header, _ = _split(good)
+    marker = tmp_path / "unpickled"
+    payload = pickle.dumps(_TouchOnUnpickle(marker))  # what a version-3 reader would unpickle
+    line = json.dumps({**header, "world_bytes": len(payload)}).encode() + b"\n"
+    mac = checkpoint._mac(checkpoint.load_key(create=False), line, payload)
+    old = tmp_path / "v3.ckpt"
+    old.write_bytes(checkpoint.MAGIC + b"format 3\n" + f"mac {mac}\n".encode() + line + payload)
+    proc = main_in_process(capsys, "run", "--resume", str(old), "--quiet")
+    assert_one_line_error(
+        proc,
+        f"--resume {old}: checkpoint format 3, this airspace-sim reads format 4",
+        "written by an older airspace-sim: rerun the scenario",
+    )
+    assert not marker.exists()
+    assert checkpoint.FORMAT == 4
 
 
 # --------------------------------------------------------------------------- SIGTERM

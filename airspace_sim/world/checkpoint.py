@@ -1,9 +1,9 @@
 """Checkpoints: a :class:`~airspace_sim.world.World` saved to a file and resumed bit for bit.
 
-Format (version 3)::
+Format (version 4)::
 
     AIRSPACE-SIM CHECKPOINT\\n                  magic line
-    format 3\\n                                 format version
+    format 4\\n                                 format version
     mac <64 hex digits>\\n                      HMAC-SHA256 over the next line and the payload
     {"meta": ..., "code": ..., "world_bytes": L}\\n     one JSON line (run metadata)
     <L bytes: pickle of the World>
@@ -41,7 +41,11 @@ from pathlib import Path
 from airspace_sim.errors import UserError
 
 MAGIC = b"AIRSPACE-SIM CHECKPOINT\n"
-FORMAT = 3
+#: Bumped whenever a saved World lacks state the code now needs, so that an old file is
+#: refused in one line instead of resuming (with only a code warning) into a failure later.
+#: 4: worlds hold ``World.retired`` (recorded traffic that left stays out); a format-3
+#: world resumes, then fails on recorded traffic.
+FORMAT = 4
 #: Environment variable naming the key file (tests, or a key shared between machines).
 KEY_ENV = "AIRSPACE_SIM_CHECKPOINT_KEY"
 _KEY_BYTES = 32
@@ -203,7 +207,11 @@ def _read(path: Path, f) -> tuple[str, bytes, dict, bytes]:
         refuse("damaged checkpoint header (no format line)")
     if words[1] != str(FORMAT).encode():
         found = words[1].decode("ascii", "replace")
-        refuse(f"checkpoint format {found}, this airspace-sim reads format {FORMAT}")
+        age = ""
+        if found.isdigit():
+            age = "an older" if int(found) < FORMAT else "a newer"
+            age = f" (written by {age} airspace-sim: rerun the scenario to make a new one)"
+        refuse(f"checkpoint format {found}, this airspace-sim reads format {FORMAT}{age}")
     line = f.readline(80)
     words = line.split()
     if len(words) != 2 or words[0] != b"mac" or len(words[1]) != 64:
