@@ -245,6 +245,62 @@ def test_repository_plugins_folder_is_not_loaded_twice(monkeypatch):
     assert not [x for x in loaded if x.endswith(".py")], loaded
 
 
+@pytest.fixture
+def registry_restored():
+    """The registry and plugin modules as they were, after the test."""
+    registry._ensure_loaded()
+    saved = {kind: dict(parts) for kind, parts in registry._REGISTRY.items()}
+    saved_modules = {k for k in sys.modules if k.startswith(PREFIX)}
+    yield
+    for k in [k for k in sys.modules if k.startswith(PREFIX) and k not in saved_modules]:
+        del sys.modules[k]
+    for kind, parts in saved.items():
+        registry._REGISTRY[kind].clear()
+        registry._REGISTRY[kind].update(parts)
+
+
+def test_a_folder_copy_identical_to_an_entry_point_plugin_is_the_one_loaded(
+    registry_restored, tmp_path, monkeypatch
+):
+    """An installed package run from a checkout: a plugins folder (here one named by
+    AIRSPACE_SIM_PLUGINS, another path than the installed file) holding byte-identical
+    copies of the shipped plugins is skipped; the entry points' classes stay registered."""
+    import airspace_sim_plugins.kalman_tracker as shipped
+
+    folder = tmp_path / "copies"
+    folder.mkdir()
+    for name in ("kalman_tracker.py", "mvp_resolver.py"):
+        shutil.copyfile(REPO / "plugins" / name, folder / name)
+    monkeypatch.chdir(tmp_path)  # no ./plugins here
+    monkeypatch.setenv("AIRSPACE_SIM_PLUGINS", str(folder))
+    loaded = registry.load_plugins()
+    assert "entry point kalman" in loaded and "entry point mvp" in loaded
+    assert not [x for x in loaded if x.endswith(".py")], loaded
+    assert registry.get("tracker", "kalman").__module__ == shipped.__name__
+    assert not [k for k in sys.modules if k.startswith(PREFIX + "kalman")]
+
+
+def test_an_edited_folder_copy_of_an_entry_point_plugin_is_refused(
+    registry_restored, tmp_path, monkeypatch
+):
+    """The same file name with one more line is another plugin claiming the name kalman:
+    refused in one line naming the copy, and the registered kalman is the shipped one."""
+    import airspace_sim_plugins.kalman_tracker as shipped
+
+    folder = tmp_path / "copies"
+    folder.mkdir()
+    text = (REPO / "plugins" / "kalman_tracker.py").read_text()
+    (folder / "kalman_tracker.py").write_text(text + "\n# edited\n")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("AIRSPACE_SIM_PLUGINS", str(folder))
+    with pytest.raises(UserError) as info:
+        registry.load_plugins()
+    msg = str(info.value)
+    assert "\n" not in msg and "would replace the registered tracker 'kalman'" in msg, msg
+    assert str(folder / "kalman_tracker.py") in msg, msg
+    assert registry.get("tracker", "kalman").__module__ == shipped.__name__
+
+
 # --------------------------------------------------------------------------- the Kalman tracker
 
 
