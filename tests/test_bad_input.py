@@ -177,7 +177,7 @@ def test_end_to_end_exit_status_and_no_traceback(tmp_path):
 
 
 def _numeric_fields(cls=schema.Scenario):
-    hints = loader._hints(cls)
+    hints = typing.get_type_hints(cls)
     for f in dataclasses.fields(cls):
         if (cls.__name__, f.name) in loader.INTERNAL_FIELDS:
             continue

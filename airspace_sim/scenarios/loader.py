@@ -2,7 +2,8 @@
 
 The checks are derived from the dataclasses in :mod:`.schema`: every field's type comes from
 its annotation (``float``, ``int``, ``str``, ``bool``, ``dict``, ``tuple[float, float]``,
-``list[X]``, ``X | None`` and nested dataclasses), and :data:`RANGES` adds what a type cannot
+``list[X]``, ``X | None`` and nested dataclasses; the conversion is :mod:`.convert`), and
+this module holds the scenario's rules: :data:`RANGES` adds what a type cannot
 say (positive time step, probabilities in [0, 1], physically meaningful bounds, names that
 must exist); :func:`check_scenario` adds the rules between fields. A new schema field is
 validated with no change here as long as its type is one of those.
@@ -24,12 +25,9 @@ dotted key and the value::
 from __future__ import annotations
 
 import dataclasses
-import difflib
-import math
 import os
 import re
 import tomllib
-import types
 import typing
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -37,7 +35,9 @@ from typing import Any
 
 import airspace_sim
 from airspace_sim.errors import UserError
+from airspace_sim.scenarios import convert as _conversion
 from airspace_sim.scenarios import schema
+from airspace_sim.scenarios.convert import Invalid, Rules, describe, hints, show
 from airspace_sim.scenarios.overrides import apply_overrides
 from airspace_sim.scenarios.schema import Scenario
 
@@ -48,15 +48,6 @@ INTERNAL_FIELDS = {("Scenario", "source"), ("AircraftSpec", "recording")}
 TRAFFIC_PATTERNS = ("none", "ring", "random", "encounter")
 #: Id prefix of the aircraft each pattern generates (``ring00``, ``ring01``, ...).
 GENERATED_ID_PREFIX = {"ring": "ring", "random": "ac", "encounter": "intruder"}
-
-
-class Invalid(Exception):
-    """A validation failure at ``path`` (dotted key), before the source is prefixed."""
-
-    def __init__(self, path: str, message: str):
-        super().__init__(f"{path}: {message}" if path else message)
-        self.path = path
-        self.message = message
 
 
 # --------------------------------------------------------------------------- range table
@@ -269,11 +260,11 @@ def ranges_table() -> str:
     rows = ["| key | range |", "| --- | --- |"]
 
     def walk(cls, prefix):
-        hints = _hints(cls)
+        tps = hints(cls)
         for f in dataclasses.fields(cls):
             if (cls.__name__, f.name) in INTERNAL_FIELDS:
                 continue
-            tp = hints[f.name]
+            tp = tps[f.name]
             key = f"{prefix}{f.name}"
             inner = [a for a in typing.get_args(tp) if dataclasses.is_dataclass(a)]
             if dataclasses.is_dataclass(tp) or inner:
@@ -295,186 +286,27 @@ def ranges_table() -> str:
 # --------------------------------------------------------------------------- conversion
 
 
-def _show(value: Any) -> str:
-    """A short, readable rendering of a value for an error message."""
-    if isinstance(value, dict):
-        text = "a table {" + ", ".join(map(str, value)) + "}"
-    elif isinstance(value, bool):
-        text = "true" if value else "false"
-    else:
-        text = repr(value)
-    return text if len(text) <= 60 else text[:57] + "..."
+def _field_check(cls, f, tp) -> Callable[[Any], str | None] | None:
+    if cls.__module__ == schema.__name__:
+        return RANGES.get(f"{cls.__name__}.{f.name}")
+    return _params_range(f.metadata, tp)  # a part's Params: the range its field declares
 
 
-def _is_number(value) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
-
-
-def describe(tp) -> str:
-    """What a value of annotation ``tp`` looks like, for messages ("a number", ...)."""
-    origin = typing.get_origin(tp)
-    args = typing.get_args(tp)
-    if tp is float:
-        return "a number"
-    if tp is int:
-        return "an integer"
-    if tp is str:
-        return "a string"
-    if tp is bool:
-        return "true or false"
-    if tp is dict or origin is dict:
-        return "a table"
-    if tp is typing.Any:
-        return "any value"
-    if dataclasses.is_dataclass(tp):
-        return "a table"
-    if origin is tuple:
-        if len(args) == 2 and args[1] is Ellipsis:
-            return f"a list of {_plural(args[0])}"
-        if len(set(args)) == 1:
-            return f"a list of {len(args)} {_plural(args[0])}"
-        return f"a list of {len(args)} values"
-    if origin is list:
-        return f"a list of {_plural(args[0])}" if args else "a list"
-    if origin in (typing.Union, types.UnionType):
-        return " or ".join(describe(a) for a in args if a is not type(None))
-    raise TypeError(f"unsupported scenario field type {tp!r}")
-
-
-def _plural(tp) -> str:
-    simple = {float: "numbers", int: "integers", str: "strings", bool: "booleans"}
-    if tp in simple:
-        return simple[tp]
-    if dataclasses.is_dataclass(tp) or tp is dict or typing.get_origin(tp) is dict:
-        return "tables"
-    origin, args = typing.get_origin(tp), typing.get_args(tp)
-    if origin is tuple and args and Ellipsis not in args and len(set(args)) == 1:
-        return f"lists of {len(args)} {_plural(args[0])}"  # e.g. [x, y] points
-    if origin in (tuple, list):
-        return "lists"
-    return describe(tp)
+#: The scenario's rules for :mod:`.convert`: :data:`RANGES` for the schema's fields, the
+#: declared ranges for a part's ``Params``; :data:`INTERNAL_FIELDS` never read.
+RULES = Rules(check=_field_check, internal=frozenset(INTERNAL_FIELDS))
 
 
 def convert(value: Any, tp, path: str, check: Callable | None = None) -> Any:
-    """``value`` as annotation ``tp`` (and passing ``check``), else :class:`Invalid`."""
-    try:
-        out = _convert(value, tp, path)
-    except Invalid as exc:
-        what = getattr(check, "what", None)
-        if what and exc.path == path:
-            raise _type_error(tp, value, path, check) from None
-        raise
-    if check is not None:
-        problem = check(out)
-        if problem:
-            raise Invalid(path, f"{problem}, got {_show(value)}")
-    return out
-
-
-def _type_error(tp, value, path, check=None) -> Invalid:
-    what = getattr(check, "what", None) or describe(tp)
-    return Invalid(path, f"expected {what}, got {_show(value)}")
-
-
-def _convert(value: Any, tp, path: str) -> Any:
-    origin = typing.get_origin(tp)
-    args = typing.get_args(tp)
-    if tp is typing.Any:
-        return value
-    if origin in (typing.Union, types.UnionType):
-        if value is None and type(None) in args:
-            return None
-        for arg in args:
-            if arg is type(None):
-                continue
-            try:
-                return _convert(value, arg, path)
-            except Invalid:
-                continue
-        raise _type_error(tp, value, path)
-    if tp is float:
-        if not _is_number(value):
-            raise _type_error(tp, value, path)
-        if not math.isfinite(value):
-            raise Invalid(path, f"expected a finite number, got {_show(value)}")
-        return float(value) + 0.0  # -0.0 → 0.0: a signed zero means nothing here
-    if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise _type_error(tp, value, path)
-        return value
-    if tp is bool or tp is str:
-        if not isinstance(value, tp):
-            raise _type_error(tp, value, path)
-        return value
-    if tp is dict or origin is dict:
-        if not isinstance(value, dict):
-            raise _type_error(tp, value, path)
-        if origin is dict and args:
-            return {k: _convert(v, args[1], f"{path}.{k}") for k, v in value.items()}
-        return dict(value)
-    if dataclasses.is_dataclass(tp):
-        return build_dataclass(tp, value, path)
-    if origin is tuple:
-        if not isinstance(value, (list, tuple)):
-            raise _type_error(tp, value, path)
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_convert(v, args[0], f"{path}[{i}]") for i, v in enumerate(value))
-        if len(value) != len(args):
-            raise _type_error(tp, value, path)
-        return tuple(
-            _convert(v, a, f"{path}[{i}]") for i, (v, a) in enumerate(zip(value, args, strict=True))
-        )
-    if origin is list or tp is list:
-        if not isinstance(value, (list, tuple)):
-            raise _type_error(tp, value, path)
-        if not args:
-            return list(value)
-        return [_convert(v, args[0], f"{path}[{i}]") for i, v in enumerate(value)]
-    raise TypeError(f"{path}: unsupported scenario field type {tp!r}")
-
-
-def _hints(cls) -> dict:
-    # a part's Params resolves its annotations in its own module
-    return typing.get_type_hints(cls, None if cls.__module__ != schema.__name__ else vars(schema))
-
-
-def _join(path: str, key: str) -> str:
-    return f"{path}.{key}" if path else key
+    """``value`` as annotation ``tp`` (and passing ``check``), else :class:`Invalid`
+    (:func:`airspace_sim.scenarios.convert.convert` under :data:`RULES`)."""
+    return _conversion.convert(value, tp, path, check, RULES)
 
 
 def build_dataclass(cls, table: Any, path: str = ""):
-    """Build dataclass ``cls`` from a TOML table, checking keys, types and :data:`RANGES`."""
-    if not isinstance(table, dict):
-        raise Invalid(path, f"expected a table, got {_show(table)}")
-    hints = _hints(cls)
-    fields = {
-        f.name: f
-        for f in dataclasses.fields(cls)
-        if f.init and (cls.__name__, f.name) not in INTERNAL_FIELDS
-    }
-    for key in table:
-        if key not in fields:
-            near = difflib.get_close_matches(str(key), list(fields), n=1)
-            hint = f"did you mean {near[0]!r}? " if near else ""
-            raise Invalid(
-                _join(path, str(key)),
-                f"unknown key, got {_show(table[key])} "
-                f"({hint}known: {', '.join(fields) if fields else 'none, it takes no keys'})",
-            )
-    kwargs = {}
-    for name, f in fields.items():
-        key_path = _join(path, name)
-        if name not in table:
-            required = f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
-            if required:
-                raise Invalid(key_path, f"missing (required: {describe(hints[name])})")
-            continue
-        if cls.__module__ == schema.__name__:
-            check = RANGES.get(f"{cls.__name__}.{name}")
-        else:  # a part's Params: the range its field declares
-            check = _params_range(f.metadata, hints[name])
-        kwargs[name] = convert(table[name], hints[name], key_path, check)
-    return cls(**kwargs)
+    """Build dataclass ``cls`` from a TOML table, checking keys, types and :data:`RANGES`
+    (:func:`airspace_sim.scenarios.convert.build_dataclass` under :data:`RULES`)."""
+    return _conversion.build_dataclass(cls, table, path, RULES)
 
 
 # --------------------------------------------------------------------------- cross-field checks
@@ -623,7 +455,7 @@ def validate_params(Params, table: dict, where: str):
     :class:`UserError` ``"<where>.<key>: ..."`` on an unknown key (listing the known ones),
     a wrong type or a value out of the field's declared range."""
     if not isinstance(table, dict):
-        raise UserError(f"{where}: expected a table, got {_show(table)}")
+        raise UserError(f"{where}: expected a table, got {show(table)}")
     try:
         return build_dataclass(Params, table, where)
     except Invalid as exc:
