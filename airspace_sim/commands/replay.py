@@ -160,10 +160,9 @@ def run(args) -> int:
     """Replay; on Ctrl-C or SIGTERM (exit 130 / 143, like ``run``) the steps so far are
     summarised, ``--json`` and ``--render`` (frames, video) written, then the run ends."""
     from airspace_sim.commands._args import check_output
+    from airspace_sim.commands._signals import SigtermFlag, Terminated
     from airspace_sim.commands.run import (
         Frames,
-        Terminated,
-        _SigtermFlag,
         format_table,
         jsonable,
         step_world,
@@ -201,7 +200,7 @@ def run(args) -> int:
     steps = sc.n_steps
     # SIGTERM only sets a flag, checked between steps: the replay stops as on Ctrl-C; one
     # that comes while the outputs are written waits for them, then ends the replay
-    with _SigtermFlag() as sigterm:
+    with SigtermFlag() as sigterm:
         t0, cpu0 = time.perf_counter(), time.process_time()
         stopped = step_world(
             world,

@@ -36,6 +36,7 @@ from airspace_sim.commands._args import (
     positive_int,
     seed,
 )
+from airspace_sim.commands._signals import SigtermFlag, Terminated
 from airspace_sim.errors import UserError, escape
 
 HELP = "run a scenario: step the world, print metrics, optionally render frames"
@@ -276,39 +277,6 @@ def load_checkpoint(path: Path):
         raise UserError(f"--resume {exc}") from None
 
 
-class Terminated(KeyboardInterrupt):
-    """SIGTERM during a run: handled like Ctrl-C (the checkpoint is saved), exit 128 + 15."""
-
-    exit_status = 128 + 15
-
-
-class _SigtermFlag:
-    """While active, SIGTERM only sets :attr:`received`; the run loop checks it between
-    steps. (Raising from the handler could land inside a library's ``__del__``, where the
-    exception is ignored and the signal lost.)"""
-
-    def __init__(self):
-        self.received = False
-        self._previous = None
-
-    def __enter__(self):
-        import signal
-        import threading
-
-        if threading.current_thread() is threading.main_thread():
-            self._previous = signal.signal(signal.SIGTERM, self._handle)
-        return self
-
-    def _handle(self, signum, frame):
-        self.received = True
-
-    def __exit__(self, *exc):
-        import signal
-
-        if self._previous is not None:
-            signal.signal(signal.SIGTERM, self._previous)
-
-
 # --------------------------------------------------------------------------- command
 
 
@@ -390,7 +358,7 @@ def run(args) -> int:
     interrupted: KeyboardInterrupt | None = None
     failed: UserError | None = None  # a frame that could not be written: save, then report
     t0 = time.perf_counter()
-    with _SigtermFlag() as sigterm:
+    with SigtermFlag() as sigterm:
         try:
             interrupted = step_world(
                 world, steps, name, args.quiet, frames, args.every, sigterm, periodic_checkpoint
@@ -434,7 +402,7 @@ def step_world(
     loop): a frame every ``every`` steps, at the last and when :attr:`World.everybody_left`
     (which stops early: nothing more to see); ``after_step(k)`` after step ``k`` (0-based).
     Returns the Ctrl-C or SIGTERM (:class:`Terminated`, when ``sigterm`` is a
-    :class:`_SigtermFlag`) that stopped it, else None; anything else propagates."""
+    :class:`SigtermFlag`) that stopped it, else None; anything else propagates."""
     from tqdm import tqdm
 
     bar = tqdm(
