@@ -305,7 +305,7 @@ def test_sigterm_saves_the_checkpoint_like_ctrl_c(tmp_path):
         text=True,
     )
     try:
-        deadline = time.monotonic() + 120
+        deadline = time.monotonic() + 300
         while not ckpt.exists():  # stepping: the first periodic checkpoint is there
             assert proc.poll() is None and time.monotonic() < deadline, proc.stderr
             time.sleep(0.05)
