@@ -223,18 +223,48 @@ def _on_tangent_ray(psi, cos_psi, sin_psi, vox, voy, vix, viy, ux, uy, scale):  
     return _sum2(wx * ux, wy * uy) > threshold
 
 
+#: guard of the window test of :func:`boundary_heading_changes` on the cosine of a root:
+#: far above the error of the root's cosine from the angle-sum formula (≲ 1e-12 with
+#: ``sin h ≥`` :data:`_WINDOW_MIN_SIN`), far below anything the window's edge resolves
+_WINDOW_GUARD = 1e-9
+#: below this ``sin h`` (two nearly equal roots) the window test is not used
+_WINDOW_MIN_SIN = 1e-4
+#: the window test is used only for limits below this, rad (``|ψ| ≤ limit`` is
+#: ``cos ψ ≥ cos(limit)`` up to π)
+_WINDOW_MAX_LIMIT = 3.1
+
+
+@njit(inline="always", error_model="numpy")
+def _roots_in_window(a, b, c, amp, cos_limit):  # pragma: no cover - compiled
+    """Whether a root of ``a cos ψ + b sin ψ = c`` (``amp = hypot(a, b)``, ``|c| ≤ amp``)
+    may lie in ``|ψ| ≤ limit``: False only when the cosines of both roots (angle-sum
+    formula, no libm call) are below ``cos(limit)`` by :data:`_WINDOW_GUARD`, so that
+    :func:`_cos_sin_roots`' roots are outside ``limit·(1 + 1e-12) + 1e-15`` too."""
+    ch = min(max(c / amp, -1.0), 1.0)
+    sh = np.sqrt(max(1.0 - ch * ch, 0.0))
+    if sh < _WINDOW_MIN_SIN:
+        return True
+    cphi, sphi = a / amp, b / amp
+    edge = cos_limit - _WINDOW_GUARD
+    return cphi * ch + sphi * sh >= edge or cphi * ch - sphi * sh >= edge
+
+
 @njit(cache=True, error_model="numpy")
-def boundary_heading_changes(vo, r, vi, valid, radius, lookahead_s):  # pragma: no cover
+def boundary_heading_changes(vo, r, vi, valid, radius, lookahead_s, limit):  # pragma: no cover
     """Per (ownship, intruder) pair the six boundary roots, ``(N, K, 6)`` rad, NaN if none.
 
     ``vo`` (N, 2) own velocity and ``vi`` (N, K, 2) intruder velocity, m/s (world frame);
     ``r`` (N, K, 2) intruder minus ownship, m; ``valid`` (N, K) bool (invalid pairs: NaN);
-    ``radius`` (N, K) m; ``lookahead_s`` T in s. Columns: the two roots of
-    :func:`tangent_heading_changes` with ``side = −1``, the two with ``side = +1``, the two of
-    :func:`range_at_time_heading_changes` at ``t = T``. One fused loop with the numpy
-    functions' operations in their order (they are the reference), so the same numbers up to
-    the last bit of the transcendental functions. The tangent roots' ray test takes their
-    cos and sin from the angle-sum formula (:func:`_on_tangent_ray`, the same decisions).
+    ``radius`` (N, K) m; ``lookahead_s`` T in s; ``limit`` (N,) rad, the search window
+    ``|ψ| ≤ limit[n]``: a pair of roots both outside it (by the cheap test
+    :func:`_roots_in_window`) is left NaN, as the candidate list drops it (``inf``: every
+    root). Columns: the two roots of :func:`tangent_heading_changes` with ``side = −1``, the
+    two with ``side = +1``, the two of :func:`range_at_time_heading_changes` at ``t = T``.
+    One fused loop with the numpy functions' operations in their order (they are the
+    reference), so the same numbers up to the last bit of the transcendental functions.
+    The tangent roots' ray test takes their cos and sin from the angle-sum formula
+    (:func:`_on_tangent_ray`, the same decisions); the two tangent directions share
+    ``cos β`` and ``sin β`` (libm's cos is even and its sin odd, bit for bit).
     """
     n_own, n_int = valid.shape
     out = np.full((n_own, n_int, 6), np.nan)
@@ -242,6 +272,8 @@ def boundary_heading_changes(vo, r, vi, valid, radius, lookahead_s):  # pragma: 
         vox, voy = vo[n, 0], vo[n, 1]
         sv = np.hypot(vox, voy)
         vv = _sum2(vox * vox, voy * voy)
+        windowed = limit[n] >= 0.0 and limit[n] < _WINDOW_MAX_LIMIT
+        cos_limit = np.cos(limit[n]) if windowed else -2.0
         for k in range(n_int):
             if not valid[n, k]:
                 continue
@@ -257,20 +289,25 @@ def boundary_heading_changes(vo, r, vi, valid, radius, lookahead_s):  # pragma: 
             else:
                 lx, ly = -1.0, 0.0
             scale = sv + np.hypot(vix, viy)
+            cb, sb = np.cos(beta), np.sin(beta)
             for s in range(2):
-                ang = (2.0 * s - 1.0) * beta
-                cs, sn = np.cos(ang), np.sin(ang)
+                cs, sn = cb, (sb if s == 1 else -sb)  # cos, sin of ang = (2s − 1)·β
                 ux = cs * lx - sn * ly
                 uy = sn * lx + cs * ly
                 nx, ny = -uy, ux
                 a = _sum2(nx * vox, ny * voy)
                 b = _sum2(nx * -voy, ny * vox)
                 c = _sum2(nx * vix, ny * viy)
-                roots = _cos_sin_roots(a, b, c)
-                if np.isnan(roots[0]):
-                    continue
-                # roots φ ∓ h: cos φ = a/amp, sin φ = b/amp, cos h = c/amp, sin h ≥ 0
+                # _cos_sin_roots, with amp computed once and no root outside the window
                 amp = np.hypot(a, b)
+                if not (abs(c / amp) <= 1.0):
+                    continue
+                if windowed and not _roots_in_window(a, b, c, amp, cos_limit):
+                    continue
+                phi = np.arctan2(b, a)
+                half = np.arccos(min(max(c / amp, -1.0), 1.0))
+                roots = (_wrap(phi - half), _wrap(phi + half))
+                # roots φ ∓ h: cos φ = a/amp, sin φ = b/amp, cos h = c/amp, sin h ≥ 0
                 cphi, sphi = a / amp, b / amp
                 ch = min(max(c / amp, -1.0), 1.0)
                 sh = np.sqrt(max(1.0 - ch * ch, 0.0))
@@ -289,5 +326,12 @@ def boundary_heading_changes(vo, r, vi, valid, radius, lookahead_s):  # pragma: 
             a = _sum2(px * vox, py * voy)
             b = _sum2(px * -voy, py * vox)
             c = (_sum2(px * px, py * py) + t * t * vv - rad * rad) / (2.0 * t)
-            out[n, k, 4], out[n, k, 5] = _cos_sin_roots(a, b, c)
+            amp = np.hypot(a, b)
+            if not (abs(c / amp) <= 1.0):
+                continue
+            if windowed and not _roots_in_window(a, b, c, amp, cos_limit):
+                continue
+            phi = np.arctan2(b, a)
+            half = np.arccos(min(max(c / amp, -1.0), 1.0))
+            out[n, k, 4], out[n, k, 5] = _wrap(phi - half), _wrap(phi + half)
     return out
