@@ -179,7 +179,7 @@ def _assert_kernel_matches(vo, r, vi, valid, radius, t):
 
     with np.errstate(all="ignore"):
         ref = _reference_roots(vo, r, vi, valid, radius, t)
-    got = boundary_heading_changes(vo, r, vi, valid, radius, t, np.full(len(vo), np.inf))
+    got = boundary_heading_changes(vo, r, vi, valid, radius, t)
     # same roots exist; values equal up to the last bits of libm vs numpy's SIMD sin/cos
     # (an angle at ±π may come out on either side of the wrap)
     assert np.array_equal(np.isnan(got), np.isnan(ref))

@@ -288,17 +288,14 @@ def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - comp
     return out, origin
 
 
-def exact_boundary_candidates(
-    own_velocity, rel_position, rel_velocity, valid, radius, lookahead_s, max_heading_change=None
-):
+def exact_boundary_candidates(own_velocity, rel_position, rel_velocity, valid, radius, lookahead_s):
     """Exact boundary heading changes of each intruder's clear set, ``(N, 6K)`` rad (NaN if none).
 
     Both tangents from :func:`~airspace_sim.avoidance.heading.tangent_heading_changes` (two
     roots each) and the two roots of ``|r + T·v_rel(ψ)| = radius``, intruder ``k`` in columns
     ``6k … 6k+5``; invalid slots NaN. Own velocity (N, 2) m/s, relative position and velocity
-    (N, K, 2) m and m/s, valid (N, K), radius float or (N, K) m, ``lookahead_s`` s;
-    ``max_heading_change`` None or (N,) rad: a pair of roots both outside that window (which
-    :func:`candidate_grid` drops) may come out NaN. One numba pass
+    (N, K, 2) m and m/s, valid (N, K), radius float or (N, K) m, ``lookahead_s`` s. One numba
+    pass
     (:func:`~airspace_sim.avoidance.heading.boundary_heading_changes`);
     :func:`exact_boundary_candidates_numpy` is the reference.
     """
@@ -307,21 +304,15 @@ def exact_boundary_candidates(
     vi = np.ascontiguousarray(np.asarray(rel_velocity, dtype=float) + vo[:, None, :])
     valid = np.ascontiguousarray(valid, dtype=bool)
     radius = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, dtype=float), r.shape[:-1]))
-    limit = np.full(vo.shape[0], np.inf)
-    if max_heading_change is not None:
-        limit = np.ascontiguousarray(
-            np.broadcast_to(np.asarray(max_heading_change, dtype=float), (vo.shape[0],))
-        )
-    out = boundary_heading_changes(vo, r, vi, valid, radius, float(lookahead_s), limit)
+    out = boundary_heading_changes(vo, r, vi, valid, radius, float(lookahead_s))
     return out.reshape(out.shape[0], -1)
 
 
 def exact_boundary_candidates_numpy(
-    own_velocity, rel_position, rel_velocity, valid, radius, lookahead_s, max_heading_change=None
+    own_velocity, rel_position, rel_velocity, valid, radius, lookahead_s
 ):
     """:func:`exact_boundary_candidates` from the numpy functions of
-    :mod:`~airspace_sim.avoidance.heading` (the reference for the kernel), ``(N, 6K)``;
-    every root, whatever ``max_heading_change``."""
+    :mod:`~airspace_sim.avoidance.heading` (the reference for the kernel), ``(N, 6K)``."""
     vo = np.asarray(own_velocity, dtype=float)[:, None, :]
     r = np.asarray(rel_position, dtype=float)
     vi = np.asarray(rel_velocity, dtype=float) + vo
@@ -390,7 +381,7 @@ def band_search(
     radius = np.asarray(r_safe, dtype=float) * (1.0 + margin)
     extra = None
     if exact_candidates and r.shape[1] > 0:
-        extra = exact_boundary_candidates(vo, r, v, valid, radius, lookahead_s, mx)
+        extra = exact_boundary_candidates(vo, r, v, valid, radius, lookahead_s)
     # sorted by preference: |ψ| (+ left_penalty for left turns), then right turn (ψ ≤ 0)
     # first, then original index
     cand, grid, origin = preferred_candidates_on_grid(mx, resolution, extra, left_penalty)

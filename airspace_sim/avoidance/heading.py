@@ -183,18 +183,6 @@ def _sum2(x0, x1):  # pragma: no cover - compiled
     return (0.0 + x0) + x1
 
 
-@njit(cache=True, error_model="numpy")
-def _cos_sin_roots(a, b, c):  # pragma: no cover - compiled
-    """Scalar :func:`_solve_cos_sin`: the two wrapped roots, rad, NaN where none."""
-    amp = np.hypot(a, b)
-    ratio = c / amp
-    phi = np.arctan2(b, a)
-    if not (abs(ratio) <= 1.0):
-        return np.nan, np.nan
-    half = np.arccos(min(max(ratio, -1.0), 1.0))
-    return _wrap(phi - half), _wrap(phi + half)
-
-
 #: guard band of the fast tangent-ray test, relative to ``|v_o| + |v_i|`` (see
 #: :func:`_on_tangent_ray`); far above the fast cos / sin's error bound (≈ 2e-8)
 _RAY_GUARD = 1e-6
@@ -203,8 +191,8 @@ _RAY_GUARD = 1e-6
 @njit(cache=True, error_model="numpy")
 def _on_tangent_ray(psi, cos_psi, sin_psi, vox, voy, vix, viy, ux, uy, scale):  # pragma: no cover
     """The tangent-ray test of :func:`tangent_heading_changes` (``λ > 1e-12·scale``) for the
-    root ``psi`` of :func:`_cos_sin_roots`, decided from ``cos_psi``, ``sin_psi``: its
-    cos and sin from the angle-sum formula (no libm call), within ~2e-8 of ``cos(psi)``,
+    root ``psi`` of ``a cos ψ + b sin ψ = c`` (as :func:`_solve_cos_sin`), decided from
+    ``cos_psi``, ``sin_psi``: its cos and sin from the angle-sum formula (no libm call), within ~2e-8 of ``cos(psi)``,
     ``sin(psi)``. Only a λ within :data:`_RAY_GUARD`·scale of the threshold (relative
     speed ≲ 1e-6·scale at the root) is recomputed with ``cos(psi)``, ``sin(psi)`` as the
     numpy reference does, so the decision is always the reference's."""
@@ -223,43 +211,15 @@ def _on_tangent_ray(psi, cos_psi, sin_psi, vox, voy, vix, viy, ux, uy, scale):  
     return _sum2(wx * ux, wy * uy) > threshold
 
 
-#: guard of the window test of :func:`boundary_heading_changes` on the cosine of a root:
-#: far above the error of the root's cosine from the angle-sum formula (≲ 1e-12 with
-#: ``sin h ≥`` :data:`_WINDOW_MIN_SIN`), far below anything the window's edge resolves
-_WINDOW_GUARD = 1e-9
-#: below this ``sin h`` (two nearly equal roots) the window test is not used
-_WINDOW_MIN_SIN = 1e-4
-#: the window test is used only for limits below this, rad (``|ψ| ≤ limit`` is
-#: ``cos ψ ≥ cos(limit)`` up to π)
-_WINDOW_MAX_LIMIT = 3.1
-
-
-@njit(inline="always", error_model="numpy")
-def _roots_in_window(a, b, c, amp, cos_limit):  # pragma: no cover - compiled
-    """Whether a root of ``a cos ψ + b sin ψ = c`` (``amp = hypot(a, b)``, ``|c| ≤ amp``)
-    may lie in ``|ψ| ≤ limit``: False only when the cosines of both roots (angle-sum
-    formula, no libm call) are below ``cos(limit)`` by :data:`_WINDOW_GUARD`, so that
-    :func:`_cos_sin_roots`' roots are outside ``limit·(1 + 1e-12) + 1e-15`` too."""
-    ch = min(max(c / amp, -1.0), 1.0)
-    sh = np.sqrt(max(1.0 - ch * ch, 0.0))
-    if sh < _WINDOW_MIN_SIN:
-        return True
-    cphi, sphi = a / amp, b / amp
-    edge = cos_limit - _WINDOW_GUARD
-    return cphi * ch + sphi * sh >= edge or cphi * ch - sphi * sh >= edge
-
-
 @njit(cache=True, error_model="numpy")
-def boundary_heading_changes(vo, r, vi, valid, radius, lookahead_s, limit):  # pragma: no cover
+def boundary_heading_changes(vo, r, vi, valid, radius, lookahead_s):  # pragma: no cover
     """Per (ownship, intruder) pair the six boundary roots, ``(N, K, 6)`` rad, NaN if none.
 
     ``vo`` (N, 2) own velocity and ``vi`` (N, K, 2) intruder velocity, m/s (world frame);
     ``r`` (N, K, 2) intruder minus ownship, m; ``valid`` (N, K) bool (invalid pairs: NaN);
-    ``radius`` (N, K) m; ``lookahead_s`` T in s; ``limit`` (N,) rad, the search window
-    ``|ψ| ≤ limit[n]``: a pair of roots both outside it (by the cheap test
-    :func:`_roots_in_window`) is left NaN, as the candidate list drops it (``inf``: every
-    root). Columns: the two roots of :func:`tangent_heading_changes` with ``side = −1``, the
-    two with ``side = +1``, the two of :func:`range_at_time_heading_changes` at ``t = T``.
+    ``radius`` (N, K) m; ``lookahead_s`` T in s. Columns: the two roots of
+    :func:`tangent_heading_changes` with ``side = −1``, the two with ``side = +1``, the two
+    of :func:`range_at_time_heading_changes` at ``t = T``.
     One fused loop with the numpy functions' operations in their order (they are the
     reference), so the same numbers up to the last bit of the transcendental functions.
     The tangent roots' ray test takes their cos and sin from the angle-sum formula
@@ -272,8 +232,6 @@ def boundary_heading_changes(vo, r, vi, valid, radius, lookahead_s, limit):  # p
         vox, voy = vo[n, 0], vo[n, 1]
         sv = np.hypot(vox, voy)
         vv = _sum2(vox * vox, voy * voy)
-        windowed = limit[n] >= 0.0 and limit[n] < _WINDOW_MAX_LIMIT
-        cos_limit = np.cos(limit[n]) if windowed else -2.0
         for k in range(n_int):
             if not valid[n, k]:
                 continue
@@ -288,7 +246,7 @@ def boundary_heading_changes(vo, r, vi, valid, radius, lookahead_s, limit):  # p
                 lx, ly = -bx / dist, -by / dist
             else:
                 lx, ly = -1.0, 0.0
-            scale = sv + np.hypot(vix, viy)
+            scale = -1.0  # sv + |v_i|, for the ray test: computed when a root needs it
             cb, sb = np.cos(beta), np.sin(beta)
             for s in range(2):
                 cs, sn = cb, (sb if s == 1 else -sb)  # cos, sin of ang = (2s − 1)·β
@@ -298,11 +256,9 @@ def boundary_heading_changes(vo, r, vi, valid, radius, lookahead_s, limit):  # p
                 a = _sum2(nx * vox, ny * voy)
                 b = _sum2(nx * -voy, ny * vox)
                 c = _sum2(nx * vix, ny * viy)
-                # _cos_sin_roots, with amp computed once and no root outside the window
+                # scalar _solve_cos_sin (no atan2 without a root); amp once for both uses
                 amp = np.hypot(a, b)
                 if not (abs(c / amp) <= 1.0):
-                    continue
-                if windowed and not _roots_in_window(a, b, c, amp, cos_limit):
                     continue
                 phi = np.arctan2(b, a)
                 half = np.arccos(min(max(c / amp, -1.0), 1.0))
@@ -311,6 +267,8 @@ def boundary_heading_changes(vo, r, vi, valid, radius, lookahead_s, limit):  # p
                 cphi, sphi = a / amp, b / amp
                 ch = min(max(c / amp, -1.0), 1.0)
                 sh = np.sqrt(max(1.0 - ch * ch, 0.0))
+                if scale < 0.0:
+                    scale = sv + np.hypot(vix, viy)
                 for j in range(2):
                     sg = -1.0 if j == 0 else 1.0
                     cos_psi = cphi * ch - sg * sphi * sh
@@ -328,8 +286,6 @@ def boundary_heading_changes(vo, r, vi, valid, radius, lookahead_s, limit):  # p
             c = (_sum2(px * px, py * py) + t * t * vv - rad * rad) / (2.0 * t)
             amp = np.hypot(a, b)
             if not (abs(c / amp) <= 1.0):
-                continue
-            if windowed and not _roots_in_window(a, b, c, amp, cos_limit):
                 continue
             phi = np.arctan2(b, a)
             half = np.arccos(min(max(c / amp, -1.0), 1.0))
