@@ -537,3 +537,44 @@ def test_committed_side_searches_only_that_side(full):
     )
     pick = free.candidates[rows, free.best_blocked[rows, col]]
     np.testing.assert_array_equal(got.heading_change[none_clear & on], pick[none_clear & on])
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_search_kernels_with_intruders_inside_the_radius_equal_the_full_band(seed):
+    """Rows with an intruder already inside the clear radius (which the fast kernels settle
+    from the current distance: no clear heading, no minimum above it), some exactly on the
+    radius or just inside or outside it: the same first clear and best blocked candidates
+    as the full evaluation."""
+    rng = np.random.default_rng(40 + seed)
+    n, k = 400, 10
+    radius = 3300.0
+    heading = rng.uniform(-np.pi, np.pi, n)
+    vo = 230.0 * np.stack([np.cos(heading), np.sin(heading)], axis=1)
+    r = rng.uniform(-25000.0, 25000.0, (n, k, 2))
+    vi = rng.uniform(-300.0, 300.0, (n, k, 2))
+    valid = rng.random((n, k)) < 0.9
+    # intruder 0 at a distance of 0.2 to 1.2 radii, or on the radius (rounded either way)
+    bearing = rng.uniform(-np.pi, np.pi, n)
+    dist = radius * rng.uniform(0.2, 1.2, n)
+    edge = rng.random(n) < 0.3
+    dist[edge] = (
+        radius * (1.0 - CLEAR_TOLERANCE) * rng.choice([1.0, 1 - 1e-15, 1 + 1e-15], edge.sum())
+    )
+    r[:, 0] = dist[:, None] * np.stack([np.cos(bearing), np.sin(bearing)], axis=1)
+    vi[:, 0] = rng.uniform(-1.0, 1.0, (n, 2)) * rng.choice([0.0, 50.0, 300.0], (n, 1))
+    mx = np.radians(rng.choice([3.0, 45.0, 90.0, 180.0], n))
+    args = (vo, r, vi - vo[:, None], valid, mx, 3000.0, 120.0, 0.1)
+    full = band_search(*args)
+    fast = band_search(*args, full=False)
+    np.testing.assert_array_equal(fast.first_clear, full.first_clear)
+    np.testing.assert_array_equal(fast.best_blocked, full.best_blocked)
+    np.testing.assert_array_equal(fast.heading_change, full.heading_change)
+    inside = valid[:, 0] & (dist < radius * (1 - CLEAR_TOLERANCE))
+    assert inside.sum() > n // 2 and (valid[:, 0] & ~inside).sum() > 20
+    assert (full.first_clear[inside] == -1).all()
+    # where the best blocked heading flies away from the close intruder, its minimum is
+    # the current distance ratio (the bound the search stops at)
+    rows = np.flatnonzero(inside & (full.best_blocked[:, 0] >= 0))
+    best = full.min_ratio[rows, full.best_blocked[rows, 0]]
+    now = np.sqrt(np.min(np.where(valid, np.sum(r * r, -1), np.inf), axis=1))[rows] / radius
+    assert (best <= now).all() and (best == now).sum() > 10

@@ -74,3 +74,16 @@ def test_radar_measure_same_bits(pd, sigma):
         np.testing.assert_array_equal(det, det_ref)
         if pd < 1.0:
             assert 0 < det.sum() < det.size
+
+
+def test_add_normals_equals_two_normal_draws():
+    """The one-pass noise of both axes adds the numbers of two :func:`normal_numpy` draws."""
+    keys = _keys(40)  # 1560 pairs
+    z = np.random.default_rng(2).uniform(-1e5, 1e5, (keys.size, 2))
+    ref = z.copy()
+    ref[:, 0] += 50.0 * streams.normal_numpy(keys, streams.NOISE_X, 7)
+    ref[:, 1] += 50.0 * streams.normal_numpy(keys, streams.NOISE_Y, 7)
+    streams.add_normals(z, keys, 50.0, streams.NOISE_X, streams.NOISE_Y, 7)
+    np.testing.assert_array_equal(z, ref)
+    with pytest.raises(ValueError, match="C-contiguous"):
+        streams.add_normals(np.zeros((2, keys.size)).T, keys, 1.0, 0, 1, 0)

@@ -179,14 +179,14 @@ def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - comp
     """Rows of ``[grid (G,), −mx[n], mx[n], extra[n] (E,)]`` (NaN outside ``±mx[n]``), sorted.
 
     The order is the lexsort key ``(mag, ψ > 0, index)``, ``mag = |ψ| (+ left_penalty)``.
-    The entries of finite ``mag`` form three runs already sorted by that key — the grid's
-    right turns by decreasing index, its left turns by increasing index (``grid`` increasing),
-    and the limits and extras after a stable sort of ``mag`` (listed right turns first,
-    each in index order) — which are merged. The grid's two runs are merged once for the
-    whole grid; a row keeps the entries inside its limit, in that order. The ``inf`` and
-    then NaN ``mag`` entries follow in the listing order, which is where the lexsort puts
-    them (every NaN here is the same ``np.nan``). Returns the sorted rows (n_own, C) and
-    the grid index of each entry (−1: not from the grid).
+    The entries of finite ``mag`` form two runs already sorted by that key — the grid's
+    (its right turns by decreasing index merged with its left turns by increasing index,
+    once for the whole grid, ``grid`` increasing; a row keeps the entries inside its
+    limit in that order) and the limits and extras after an insertion sort by the whole
+    key (a few dozen per row; of an index permutation, one move per shift) — which are
+    merged. The ``inf`` and then NaN ``mag`` entries follow in the listing order, which is
+    where the lexsort puts them (every NaN here is the same ``np.nan``). Returns the
+    sorted rows (n_own, C) and the grid index of each entry (−1: not from the grid).
     """
     n_own, n_extra = extra.shape
     n_grid = grid.size
@@ -196,7 +196,6 @@ def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - comp
         split += 1
     out = np.empty((n_own, n_cand))
     origin = np.full((n_own, n_cand), -1, dtype=np.int64)
-    row = np.empty(n_cand)
     rv, rm, rl, ri = (
         np.empty(n_cand),
         np.empty(n_cand),
@@ -206,9 +205,11 @@ def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - comp
     lv, lm, ll, li = rv.copy(), rm.copy(), rl.copy(), ri.copy()
     gv, gm, gl, gi = rv.copy(), rm.copy(), rl.copy(), ri.copy()
     xv, xm, xl, xi = rv.copy(), rm.copy(), rl.copy(), ri.copy()
+    sv, sm, sl, si = rv.copy(), rm.copy(), rl.copy(), ri.copy()
     ov, om, ol, oi = rv.copy(), rm.copy(), rl.copy(), ri.copy()
+    perm = np.empty(n_cand, np.int64)
     tail = np.empty((4, n_cand))
-    nt = np.zeros(4, np.int64)  # tail counts: (inf, right), (inf, left), (NaN, right), ...
+    nt = np.zeros(4, np.int64)
     # the whole grid's order: its right turns by decreasing index merged with its left
     # turns by increasing index
     nr = 0
@@ -228,6 +229,20 @@ def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - comp
     )
     for n in range(n_own):
         lim = mx[n] * (1 + 1e-12) + 1e-15
+        # the grid entries inside the limit, in the grid's order; the others are NaN
+        ng = 0
+        for q in range(n_all):
+            if abs(all_v[q]) <= lim:
+                gv[ng], gm[ng], gl[ng], gi[ng] = all_v[q], all_m[q], all_l[q], all_i[q]
+                ng += 1
+        # the limits and extras of finite mag (inside the limit) to sort; the others into
+        # the tail lists in listing order: (inf, right) — NaN ranks as mag = inf, right —
+        # (inf, left), then the grid's NaN and NaN mag (a NaN left_penalty)
+        nx = 0
+        nt[:] = 0
+        for q in range(n_all - ng):
+            tail[2, q] = np.nan
+        nt[2] = n_all - ng
         for j in range(n_grid, n_cand):
             if j == n_grid:
                 c = -mx[n]
@@ -235,51 +250,39 @@ def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - comp
                 c = mx[n]
             else:
                 c = extra[n, j - n_grid - 2]
-            row[j] = c if abs(c) <= lim else np.nan
-        # the grid entries inside the limit, in the grid's order; the others are NaN
-        ng = 0
-        for q in range(n_all):
-            if abs(all_v[q]) <= lim:
-                gv[ng], gm[ng], gl[ng], gi[ng] = all_v[q], all_m[q], all_l[q], all_i[q]
-                ng += 1
-        # limits and extras of finite mag listed right turns first, then a stable insertion
-        # sort by mag (a few dozen per row); the rest into the inf / NaN tail lists
-        nx = nxl = 0
-        nt[:] = 0
-        for q in range(n_all - ng):
-            tail[2, q] = np.nan
-        nt[2] = n_all - ng
-        for j in range(n_grid, n_cand):
-            c = row[j]
+            if not (abs(c) <= lim):
+                c = np.nan
             left = c > 0.0
             g = np.inf if np.isnan(c) else abs(c) + (left_penalty if left else 0.0)
             if g < np.inf:
-                if left:
-                    lv[nxl], lm[nxl], li[nxl] = c, g, j
-                    nxl += 1
-                else:
-                    xv[nx], xm[nx], xl[nx], xi[nx] = c, g, False, j
-                    nx += 1
+                xv[nx], xm[nx], xl[nx], xi[nx] = c, g, left, j
+                nx += 1
             else:
                 q = (0 if g == np.inf else 2) + (1 if left else 0)
                 tail[q, nt[q]] = c
                 nt[q] += 1
-        for i in range(nxl):
-            xv[nx], xm[nx], xl[nx], xi[nx] = lv[i], lm[i], True, li[i]
-            nx += 1
+        for i in range(nx):
+            perm[i] = i
         for i in range(1, nx):
-            v, g, lf, ix = xv[i], xm[i], xl[i], xi[i]
+            p = perm[i]
+            g, lf, ix = xm[p], xl[p], xi[p]
             k = i - 1
-            while k >= 0 and xm[k] > g:
-                xv[k + 1], xm[k + 1], xl[k + 1], xi[k + 1] = xv[k], xm[k], xl[k], xi[k]
+            while k >= 0:
+                q = perm[k]
+                if xm[q] < g or (xm[q] == g and (xl[q] < lf or (xl[q] == lf and xi[q] < ix))):
+                    break
+                perm[k + 1] = q
                 k -= 1
-            xv[k + 1], xm[k + 1], xl[k + 1], xi[k + 1] = v, g, lf, ix
-        m = _merge(gv, gm, gl, gi, ng, xv, xm, xl, xi, nx, ov, om, ol, oi, 0)
+            perm[k + 1] = p
+        for i in range(nx):
+            p = perm[i]
+            sv[i], sm[i], sl[i], si[i] = xv[p], xm[p], xl[p], xi[p]
+        m = _merge(gv, gm, gl, gi, ng, sv, sm, sl, si, nx, ov, om, ol, oi, 0)
         out[n, :m] = ov[:m]
         for i in range(m):
             if oi[i] < n_grid:
                 origin[n, i] = oi[i]
-        for q in range(4):  # then mag = inf, then mag = NaN, right turns first
+        for q in range(4):
             out[n, m : m + nt[q]] = tail[q, : nt[q]]
             m += nt[q]
     return out, origin
@@ -292,7 +295,8 @@ def exact_boundary_candidates(own_velocity, rel_position, rel_velocity, valid, r
     roots each) and the two roots of ``|r + T·v_rel(ψ)| = radius``, intruder ``k`` in columns
     ``6k … 6k+5``; invalid slots NaN. Own velocity (N, 2) m/s, relative position and velocity
     (N, K, 2) m and m/s, valid (N, K), radius float or (N, K) m, ``lookahead_s`` s. One numba
-    pass (:func:`~airspace_sim.avoidance.heading.boundary_heading_changes`);
+    pass
+    (:func:`~airspace_sim.avoidance.heading.boundary_heading_changes`);
     :func:`exact_boundary_candidates_numpy` is the reference.
     """
     vo = np.ascontiguousarray(own_velocity, dtype=float)

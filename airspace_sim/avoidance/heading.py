@@ -183,18 +183,6 @@ def _sum2(x0, x1):  # pragma: no cover - compiled
     return (0.0 + x0) + x1
 
 
-@njit(cache=True, error_model="numpy")
-def _cos_sin_roots(a, b, c):  # pragma: no cover - compiled
-    """Scalar :func:`_solve_cos_sin`: the two wrapped roots, rad, NaN where none."""
-    amp = np.hypot(a, b)
-    ratio = c / amp
-    phi = np.arctan2(b, a)
-    if not (abs(ratio) <= 1.0):
-        return np.nan, np.nan
-    half = np.arccos(min(max(ratio, -1.0), 1.0))
-    return _wrap(phi - half), _wrap(phi + half)
-
-
 #: guard band of the fast tangent-ray test, relative to ``|v_o| + |v_i|`` (see
 #: :func:`_on_tangent_ray`); far above the fast cos / sin's error bound (≈ 2e-8)
 _RAY_GUARD = 1e-6
@@ -203,8 +191,8 @@ _RAY_GUARD = 1e-6
 @njit(cache=True, error_model="numpy")
 def _on_tangent_ray(psi, cos_psi, sin_psi, vox, voy, vix, viy, ux, uy, scale):  # pragma: no cover
     """The tangent-ray test of :func:`tangent_heading_changes` (``λ > 1e-12·scale``) for the
-    root ``psi`` of :func:`_cos_sin_roots`, decided from ``cos_psi``, ``sin_psi``: its
-    cos and sin from the angle-sum formula (no libm call), within ~2e-8 of ``cos(psi)``,
+    root ``psi`` of ``a cos ψ + b sin ψ = c`` (as :func:`_solve_cos_sin`), decided from
+    ``cos_psi``, ``sin_psi``: its cos and sin from the angle-sum formula (no libm call), within ~2e-8 of ``cos(psi)``,
     ``sin(psi)``. Only a λ within :data:`_RAY_GUARD`·scale of the threshold (relative
     speed ≲ 1e-6·scale at the root) is recomputed with ``cos(psi)``, ``sin(psi)`` as the
     numpy reference does, so the decision is always the reference's."""
@@ -230,11 +218,13 @@ def boundary_heading_changes(vo, r, vi, valid, radius, lookahead_s):  # pragma: 
     ``vo`` (N, 2) own velocity and ``vi`` (N, K, 2) intruder velocity, m/s (world frame);
     ``r`` (N, K, 2) intruder minus ownship, m; ``valid`` (N, K) bool (invalid pairs: NaN);
     ``radius`` (N, K) m; ``lookahead_s`` T in s. Columns: the two roots of
-    :func:`tangent_heading_changes` with ``side = −1``, the two with ``side = +1``, the two of
-    :func:`range_at_time_heading_changes` at ``t = T``. One fused loop with the numpy
-    functions' operations in their order (they are the reference), so the same numbers up to
-    the last bit of the transcendental functions. The tangent roots' ray test takes their
-    cos and sin from the angle-sum formula (:func:`_on_tangent_ray`, the same decisions).
+    :func:`tangent_heading_changes` with ``side = −1``, the two with ``side = +1``, the two
+    of :func:`range_at_time_heading_changes` at ``t = T``.
+    One fused loop with the numpy functions' operations in their order (they are the
+    reference), so the same numbers up to the last bit of the transcendental functions.
+    The tangent roots' ray test takes their cos and sin from the angle-sum formula
+    (:func:`_on_tangent_ray`, the same decisions); the two tangent directions share
+    ``cos β`` and ``sin β`` (libm's cos is even and its sin odd, bit for bit).
     """
     n_own, n_int = valid.shape
     out = np.full((n_own, n_int, 6), np.nan)
@@ -256,24 +246,29 @@ def boundary_heading_changes(vo, r, vi, valid, radius, lookahead_s):  # pragma: 
                 lx, ly = -bx / dist, -by / dist
             else:
                 lx, ly = -1.0, 0.0
-            scale = sv + np.hypot(vix, viy)
+            scale = -1.0  # sv + |v_i|, for the ray test: computed when a root needs it
+            cb, sb = np.cos(beta), np.sin(beta)
             for s in range(2):
-                ang = (2.0 * s - 1.0) * beta
-                cs, sn = np.cos(ang), np.sin(ang)
+                cs, sn = cb, (sb if s == 1 else -sb)  # cos, sin of ang = (2s − 1)·β
                 ux = cs * lx - sn * ly
                 uy = sn * lx + cs * ly
                 nx, ny = -uy, ux
                 a = _sum2(nx * vox, ny * voy)
                 b = _sum2(nx * -voy, ny * vox)
                 c = _sum2(nx * vix, ny * viy)
-                roots = _cos_sin_roots(a, b, c)
-                if np.isnan(roots[0]):
-                    continue
-                # roots φ ∓ h: cos φ = a/amp, sin φ = b/amp, cos h = c/amp, sin h ≥ 0
+                # scalar _solve_cos_sin (no atan2 without a root); amp once for both uses
                 amp = np.hypot(a, b)
+                if not (abs(c / amp) <= 1.0):
+                    continue
+                phi = np.arctan2(b, a)
+                half = np.arccos(min(max(c / amp, -1.0), 1.0))
+                roots = (_wrap(phi - half), _wrap(phi + half))
+                # roots φ ∓ h: cos φ = a/amp, sin φ = b/amp, cos h = c/amp, sin h ≥ 0
                 cphi, sphi = a / amp, b / amp
                 ch = min(max(c / amp, -1.0), 1.0)
                 sh = np.sqrt(max(1.0 - ch * ch, 0.0))
+                if scale < 0.0:
+                    scale = sv + np.hypot(vix, viy)
                 for j in range(2):
                     sg = -1.0 if j == 0 else 1.0
                     cos_psi = cphi * ch - sg * sphi * sh
@@ -289,5 +284,10 @@ def boundary_heading_changes(vo, r, vi, valid, radius, lookahead_s):  # pragma: 
             a = _sum2(px * vox, py * voy)
             b = _sum2(px * -voy, py * vox)
             c = (_sum2(px * px, py * py) + t * t * vv - rad * rad) / (2.0 * t)
-            out[n, k, 4], out[n, k, 5] = _cos_sin_roots(a, b, c)
+            amp = np.hypot(a, b)
+            if not (abs(c / amp) <= 1.0):
+                continue
+            phi = np.arctan2(b, a)
+            half = np.arccos(min(max(c / amp, -1.0), 1.0))
+            out[n, k, 4], out[n, k, 5] = _wrap(phi - half), _wrap(phi + half)
     return out

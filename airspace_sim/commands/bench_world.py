@@ -6,8 +6,9 @@ surveillance), and — with trackers — the bare IMM step over the same number 
 (same preset, in this process, right after): the ratio says how much of a world step is
 not tracking. Also steps per second, the peak resident memory and the memory per track.
 Then how the cost per step grows (ratio of times per step and the exponent
-``log(ratio) / log(N₂/N₁)``: 1 is linear, 2 quadratic; and the same in tracks), between
-consecutive sizes and from 1000 aircraft to the largest::
+``log(ratio) / log(N₂/N₁)``: 1 is linear, 2 quadratic; and the same in tracks), in wall-clock
+and in process CPU time (the one to read on a shared machine), between consecutive sizes
+and from 1000 aircraft to the largest::
 
     airspace-sim bench-world
     airspace-sim bench-world --sizes 100 1000 3000 10000
@@ -44,7 +45,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--steps",
         type=positive_int,
         default=10,
-        help="timed steps per size, after 5 untimed warm-up steps (default 10)",
+        help="timed steps per size, after at least 5 untimed warm-up steps, on until one "
+        "step after the first conflict (default 10)",
     )
     parser.add_argument(
         "--trackers",
@@ -66,8 +68,10 @@ def _exponent(ratio: float, size_ratio: float) -> float:
 
 def growth(rows: list[dict]) -> list[dict]:
     """Cost growth between consecutive sizes, and from :data:`GROWTH_FROM` aircraft to the
-    largest size when those are not consecutive, per tracker setting: the time ratio, its
-    exponent in the number of aircraft and (``track_exponent``) in the number of tracks."""
+    largest size when those are not consecutive, per tracker setting: the wall-clock time
+    ratio, its exponent in the number of aircraft and (``track_exponent``) in the number of
+    tracks, and the same in process CPU time (``cpu_time_ratio``, ``cpu_exponent``,
+    ``cpu_track_exponent``: what a shared machine's other jobs disturb least)."""
     out = []
     for trackers in dict.fromkeys(r["trackers"] for r in rows):
         rs = sorted((r for r in rows if r["trackers"] == trackers), key=lambda r: r["aircraft"])
@@ -76,18 +80,28 @@ def growth(rows: list[dict]) -> list[dict]:
         pairs += [(start[0], rs[-1])] if start else []
         for a, b in pairs:
             ratio = b["ms_per_step"] / a["ms_per_step"]
+            cpu = b["cpu_ms_per_step"] / a["cpu_ms_per_step"]
             tracks = (b.get("tracks") or 0.0) / (a.get("tracks") or math.inf)
+            size = b["aircraft"] / a["aircraft"]
             out.append(
                 {
                     "trackers": trackers,
                     "from": a["aircraft"],
                     "to": b["aircraft"],
                     "time_ratio": ratio,
-                    "exponent": _exponent(ratio, b["aircraft"] / a["aircraft"]),
+                    "exponent": _exponent(ratio, size),
                     "track_exponent": _exponent(ratio, tracks),
+                    "cpu_time_ratio": cpu,
+                    "cpu_exponent": _exponent(cpu, size),
+                    "cpu_track_exponent": _exponent(cpu, tracks),
                 }
             )
     return out
+
+
+def _in_tracks(g: dict, key: str) -> str:
+    value = g.get(key, math.nan)
+    return "" if math.isnan(value) else f", {value:.2f} in tracks"
 
 
 def _opt(value, fmt: str, width: int) -> str:
@@ -126,18 +140,22 @@ def format_report(rows: list[dict], grow: list[dict]) -> str:
         "steps/s: all timed steps; peak MB: the process's peak resident memory while the "
         "world was built and stepped; KB/track: that peak less the memory before, per track)"
     )
+    late = [r for r in rows if r.get("kernels_loaded_timed")]
+    for r in late:
+        lines.append(
+            f"warning: {r['kernels_loaded_timed']} numba kernels were compiled or loaded during "
+            f"the timed steps at {r['aircraft']} aircraft (their time is in the medians' steps)"
+        )
     if grow:
         lines.append("")
         for g in grow:
             lines.append(
                 f"trackers {'on' if g['trackers'] else 'off'}: {g['from']} → {g['to']} aircraft "
                 f"(×{g['to'] / g['from']:.3g}): time per step ×{g['time_ratio']:.2f}, "
-                f"growth exponent {g['exponent']:.2f} (1 = linear, 2 = quadratic)"
-                + (
-                    ""
-                    if math.isnan(g.get("track_exponent", math.nan))
-                    else f", {g['track_exponent']:.2f} in tracks"
-                )
+                f"growth exponent {g['exponent']:.2f}{_in_tracks(g, 'track_exponent')} "
+                f"(wall clock); CPU time per step ×{g['cpu_time_ratio']:.2f}, growth exponent "
+                f"{g['cpu_exponent']:.2f}{_in_tracks(g, 'cpu_track_exponent')} (CPU) "
+                "(1 = linear, 2 = quadratic)"
             )
     return "\n".join(lines)
 
@@ -167,6 +185,8 @@ def run(args) -> int:
                     "cpu_ratio": r.get("cpu_ratio"),
                     "peak_rss_mb": r.get("peak_rss_mb"),
                     "bytes_per_track": r.get("bytes_per_track"),
+                    "warmup_steps": r.get("warmup_steps"),
+                    "kernels_loaded_timed": r.get("kernels_loaded_timed"),
                 }
             )
     grow = growth(rows)

@@ -161,6 +161,21 @@ def _reset_peak_rss() -> bool:
         return False
 
 
+#: most untimed steps :func:`bench_world` adds to ``warmup`` while waiting for a conflict
+MAX_EXTRA_WARMUP = 50
+
+
+def _kernel_specialisations() -> int:
+    """Compiled (or cache-loaded) numba specialisations in this process: the sum over
+    every live numba dispatcher of its overloads. One more between two calls means a
+    kernel was compiled or loaded in between."""
+    import gc
+
+    from numba.core.registry import CPUDispatcher
+
+    return sum(len(o.overloads) for o in gc.get_objects() if isinstance(o, CPUDispatcher))
+
+
 def bench_world(
     n_aircraft: int,
     steps: int = 50,
@@ -172,10 +187,14 @@ def bench_world(
     """Time ``steps`` world steps of :func:`random_scenario` with ``n_aircraft`` aircraft.
 
     Returns a dict: ``n_aircraft``, ``steps``, ``trackers``, ``steps_per_s`` and
-    ``seconds`` (after ``warmup`` untimed steps, which also compile numba kernels),
+    ``seconds`` (after ``warmup_steps`` untimed steps: at least ``warmup``, and on until one
+    step after the first with a conflict, at most :data:`MAX_EXTRA_WARMUP` more, so that
+    the numba kernels are compiled or loaded before the timing),
     ``ms_per_step`` (median wall-clock time over the timed steps), ``cpu_ms_per_step``
     (median process CPU time), ``mean_tracks`` (average number of (ownship, intruder)
-    tracks), ``setup_s``; on Linux also ``peak_rss_mb`` (the process's peak resident memory
+    tracks), ``setup_s``, ``warmup_steps``, ``kernels_loaded_timed`` (numba specialisations
+    compiled or loaded during the timed steps: 0 unless a kernel first ran late); on Linux
+    also ``peak_rss_mb`` (the process's peak resident memory
     while the world was built and stepped, MB) and ``bytes_per_track`` (that peak less the
     resident memory before, per mean track: everything the world holds, shared by its
     tracks). With trackers and ``compare_imm``, also ``imm`` (:func:`bare_imm`
@@ -194,8 +213,18 @@ def bench_world(
     sc = random_scenario(n_aircraft, trackers=trackers, seed=seed)
     world = World(sc, seed=seed)
     setup = time.perf_counter() - t0
-    for _ in range(warmup):
+    # the band-search kernels are first called (compiled, or loaded from numba's cache)
+    # in the first step with a conflict, once tracks are confirmed: warm up until one step
+    # after that one too, so that no timed step compiles or loads a kernel
+    warm, until = 0, None
+    while warm < warmup + MAX_EXTRA_WARMUP:
+        if warm >= warmup and until is not None and warm >= until:
+            break
         world.step()
+        warm += 1
+        if until is None and world.conflict.any():
+            until = warm + 1
+    loaded = _kernel_specialisations()
     tracks = 0
     per_step, cpu = [], []
     t0 = time.perf_counter()
@@ -206,6 +235,7 @@ def bench_world(
         per_step.append(time.perf_counter() - t1)
         tracks += len(world.tracks)
     elapsed = time.perf_counter() - t0
+    loaded = _kernel_specialisations() - loaded
     out = {
         "n_aircraft": int(n_aircraft),
         "steps": int(steps),
@@ -216,6 +246,8 @@ def bench_world(
         "cpu_ms_per_step": 1000.0 * float(np.median(cpu)),
         "mean_tracks": tracks / max(steps, 1),
         "setup_s": setup,
+        "warmup_steps": warm,
+        "kernels_loaded_timed": loaded,
     }
     peak = _rss_bytes("VmHWM") if peak_known else None
     if peak is not None and rss0 is not None:

@@ -188,6 +188,28 @@ def _pair_scan(ids, cx, cy, pos, vel, following, n_key, dmod2, hmd2, tau_mod, r_
     return wcv[:nw], pred[:nq]
 
 
+@njit(cache=True, error_model="numpy")
+def _closest_pair_distance(keys, n, positions):  # pragma: no cover - compiled
+    """``min over keys of hypot(positions[i] − positions[j])``, m, for pair keys
+    ``i·n + j`` (P,) int64 and positions (N, 2) m (``inf`` for no key): the numpy
+    expression's value, with ``hypot`` (libm, as numpy's) evaluated only for pairs whose
+    squared distance is within a relative 1e-9 of the smallest so far (``hypot`` and the
+    rounded square differ by far less), not for all of them."""
+    best = np.inf
+    best2 = np.inf
+    for p in range(keys.size):
+        i, j = keys[p] // n, keys[p] % n
+        dx = positions[i, 0] - positions[j, 0]
+        dy = positions[i, 1] - positions[j, 1]
+        d2 = dx * dx + dy * dy
+        if d2 <= best2 * (1.0 + 1e-9) or not (d2 == d2):
+            d = np.hypot(dx, dy)
+            if d < best or not (d == d):
+                best = d
+            best2 = min(best2, d2)
+    return best
+
+
 class WorldMetrics:
     """The accumulators of one world run (definitions in the module docstring).
 
@@ -283,9 +305,8 @@ class WorldMetrics:
         self.nmac_keys.update(int(k) for k in nmac_keys)
         self.los_pair_steps += int(los_keys.size)
         if range_keys.size:
-            i, j = range_keys // n, range_keys % n
-            d = np.hypot(*(positions[i] - positions[j]).T)
-            self.min_sep = min(self.min_sep, float(d.min()))
+            d = _closest_pair_distance(range_keys, n, np.ascontiguousarray(positions, dtype=float))
+            self.min_sep = min(self.min_sep, float(d))
         if los_keys.size:
             i, j = los_keys // n, los_keys % n
             d = np.hypot(*(positions[i] - positions[j]).T)

@@ -40,13 +40,11 @@ class Radar(Sensor):
         return step % self.period_steps == 0
 
     def measure(self, owner, intruder, positions, pair_keys, step):
-        truth = positions[intruder]
         if self.pd >= 1.0:
             detected = np.ones(owner.size, dtype=bool)
         else:
             detected = streams.uniform(pair_keys, streams.DETECT, step) < self.pd
-        z = truth.copy()
+        z = np.ascontiguousarray(positions[intruder], dtype=float)  # a new array: the truth
         if self.sigma > 0:
-            z[:, 0] += self.sigma * streams.normal(pair_keys, streams.NOISE_X, step)
-            z[:, 1] += self.sigma * streams.normal(pair_keys, streams.NOISE_Y, step)
+            streams.add_normals(z, pair_keys, self.sigma, streams.NOISE_X, streams.NOISE_Y, step)
         return z, detected

@@ -105,6 +105,30 @@ def _normal_kernel(keys, word1, word2):  # pragma: no cover - compiled
     return out
 
 
+@njit(cache=True)
+def _add_normals_kernel(z, keys, scale, w1x, w2x, w1y, w2y):  # pragma: no cover - compiled
+    """``z[p, 0] += scale·normal_x[p]``, ``z[p, 1] += scale·normal_y[p]`` in place, z (P, 2),
+    keys (P,) uint64; the normals of two streams (counter words ``w1x, w2x`` and
+    ``w1y, w2y``) in one pass over the keys."""
+    for p in range(keys.size):
+        z[p, 0] += scale * draw_normal(keys[p], w1x, w2x)
+        z[p, 1] += scale * draw_normal(keys[p], w1y, w2y)
+
+
+def add_normals(
+    z: np.ndarray, keys: np.ndarray, scale: float, stream_x: int, stream_y: int, step: int
+) -> None:
+    """Add ``scale·normal(keys, stream_x, step)`` to ``z[:, 0]`` and ``scale·normal(keys,
+    stream_y, step)`` to ``z[:, 1]``, in place (the same numbers, one pass). ``z`` (P, 2)
+    float64 C-contiguous, ``keys`` (P,) uint64, ``scale`` in z's unit."""
+    k = np.ascontiguousarray(keys, dtype=np.uint64).reshape(-1)
+    if z.shape != (k.size, 2) or z.dtype != np.float64 or not z.flags.c_contiguous:
+        raise ValueError(f"add_normals: z must be C-contiguous float64 ({k.size}, 2)")
+    w1x, w2x = _counter_word(2 * stream_x + 1000, step), _counter_word(2 * stream_x + 1001, step)
+    w1y, w2y = _counter_word(2 * stream_y + 1000, step), _counter_word(2 * stream_y + 1001, step)
+    _add_normals_kernel(z, k, float(scale), w1x, w2x, w1y, w2y)
+
+
 def uniform(keys: np.ndarray, stream: int, step: int) -> np.ndarray:
     """Uniform numbers in [0, 1), one per key, for this (stream, step), shape of ``keys``."""
     k = np.ascontiguousarray(keys, dtype=np.uint64)
