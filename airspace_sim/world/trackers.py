@@ -115,16 +115,19 @@ def _advance(live, owner, intruder, misses, age, slot_of_det, gated, scanned, dr
 
 
 def mode_names(preset: Preset) -> tuple[str, ...]:
-    """Names of the preset's modes: straight, left, right for the 3-mode presets."""
-    if preset.n_modes == 3:
+    """Names of the preset's modes: straight, left, right for the 3-mode presets of known
+    rates 0, +ω, −ω (the traffic's modes); else :meth:`Preset.mode_names`."""
+    w = preset.turn_rates
+    if preset.n_modes == 3 and not preset.estimated().any() and w[0] == 0 and w[1] == -w[2] > 0:
         return ("straight", "left", "right")
-    return tuple(f"mode{j}" for j in range(preset.n_modes))
+    return preset.mode_names()
 
 
 @register("tracker", "imm")
 class ImmTracker(parts.Tracker):
-    """The preset's matched IMM (:meth:`Preset.imm_arguments`) with R = σ² I, in slots
-    (:class:`~airspace_sim.tracking.imm.SlotIMM`); tracks start at the preset's ``mu0``.
+    """The IMM of the preset's tracker model (:meth:`Preset.filter_model`: the preset's
+    own matched IMM unless it names another) with R = σ² I, in slots
+    (:class:`~airspace_sim.tracking.imm.SlotIMM`); tracks start at that model's ``mu0``.
 
     Arrays are read-only views of the IMM's buffers, valid until the next step, birth or
     drop (:class:`SlotIMM`); free slots hold NaN.
@@ -142,12 +145,12 @@ class ImmTracker(parts.Tracker):
     reports_gated = True
 
     def __init__(self, preset: Preset, sigma: float, params=None):
-        p = preset.with_(measurement_sigma=max(float(sigma), 1e-3))
+        p = preset.with_(measurement_sigma=max(float(sigma), 1e-3)).filter_model()
         self.params = self.Params() if params is None else params
         self.imm = SlotIMM(**p.imm_arguments(), kernel=self.params.kernel)
         self._mu0 = p.mu0()
-        self.n_modes = preset.n_modes
-        self.mode_names = mode_names(preset)
+        self.n_modes = p.n_modes
+        self.mode_names = mode_names(p)
 
     capacity = property(lambda self: self.imm.capacity, doc="Number of lanes allocated.")
     alive = property(lambda self: self.imm.alive, doc="(capacity,) bool: live slots.")
@@ -314,8 +317,8 @@ class TrackTable:
         params=None,
     ) -> TrackTable:
         """The table of the registered tracker ``kind`` (:func:`make_tracker`), with the
-        initial Ω σ from ``preset``'s fastest turn (at least 3°/s)."""
-        rates = np.abs(np.asarray(preset.turn_rates, dtype=float))
+        initial Ω σ from the fastest turn of ``preset``'s tracker model (at least 3°/s)."""
+        rates = np.abs(np.asarray(preset.filter_model().turn_rates, dtype=float))
         omega = max(float(rates.max(initial=0.0)), MIN_TURN_RATE_SIGMA)
         tracker = make_tracker(kind, preset, sigma, params)
         return cls(n_aircraft, tracker, sigma, drop_after_misses, scan_period_s, omega)
