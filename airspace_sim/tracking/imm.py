@@ -551,11 +551,9 @@ class SlotIMM:
                 raise UserError(f"IMM step: dt must be a positive number of seconds, got {dt!r}")
             if step_dt != self._dt:
                 Fv, Q, U, Pi = self._model_at(step_dt)
-        head = (self._Fr, self._Fc, Fv, self._Fnnz, Q, U)
-        if self.kernel == "loops":
-            head = head + (self._ct, step_dt)
         self._kernel(
-            *head, self._Hr, self._Hc, self._Hv, self._R, Pi, self.gate_threshold,
+            self._Fr, self._Fc, Fv, self._Fnnz, Q, U, self._ct, step_dt,
+            self._Hr, self._Hc, self._Hv, self._R, Pi, self.gate_threshold,
             z, self._slots.alive, self._xs, self._Ps, self._mus,
             self._x, self._P, self._mu, self._nis, self._ll, self._gated,
         )  # fmt: skip
