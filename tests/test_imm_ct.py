@@ -84,6 +84,26 @@ def turning_measurements(rng, K, T, sigma):
     return np.array(zs)
 
 
+def linear_kf(a, j, x0, P0):
+    """filterpy's KalmanFilter for the linear mode ``j`` of IMM arguments ``a``."""
+    kf = KalmanFilter(dim_x=5, dim_z=2, dim_u=1)
+    kf.F, kf.Q = a["transitions"][j].copy(), a["process_noise"][j].copy()
+    kf.H, kf.R = a["measurement_matrix"].copy(), a["measurement_noise"].copy()
+    kf.B = a["offsets"][j][:, None].copy()
+    kf.x, kf.P = x0[:, None].copy(), P0.copy()
+    return kf
+
+
+def imm_equals_filterpy(imm, ref, zs):
+    """Step ``imm`` and filterpy's IMMEstimator ``ref`` on ``zs`` (K, 2), equal at each step."""
+    for z in zs:
+        imm.step(z[None])
+        ref.predict(u=np.ones((1, 1)))
+        ref.update(z[:, None])
+        scaled_close(imm.x[0], imm.P[0], ref.x[:, 0], ref.P)
+        np.testing.assert_allclose(imm.mu[0], ref.mu, rtol=1e-7, atol=1e-12)
+
+
 def scaled_close(x, P, rx, rP):
     s = np.sqrt(np.diag(rP))
     np.testing.assert_allclose(x / s, rx / s, rtol=1e-7, atol=1e-9)
@@ -123,19 +143,10 @@ def test_straight_and_estimated_turn_equal_filterpy_imm():
     imm = IMM(**a, x0=x0[None], P0=P0, mu0=mu0, gate_probability=1.0)
     assert imm.kernel == "loops"
     assert IMM.from_preset(p, x0[None], P0).mode_names == ("straight", "turn")
-    kf = KalmanFilter(dim_x=5, dim_z=2, dim_u=1)
-    kf.F, kf.Q = a["transitions"][0].copy(), a["process_noise"][0].copy()
-    kf.H, kf.R = a["measurement_matrix"].copy(), a["measurement_noise"].copy()
-    kf.B = a["offsets"][0][:, None].copy()
-    kf.x, kf.P = x0[:, None].copy(), P0.copy()
+    kf = linear_kf(a, 0, x0, P0)
     ekf = CTEKF(T, a["process_noise"][1], a["measurement_matrix"], a["measurement_noise"], x0, P0)
     ref = IMMEstimator([kf, ekf], mu0.copy(), a["transition_matrix"].copy())
-    for z in turning_measurements(rng, 120, T, sigma):
-        imm.step(z[None])
-        ref.predict(u=np.ones((1, 1)))
-        ref.update(z[:, None])
-        scaled_close(imm.x[0], imm.P[0], ref.x[:, 0], ref.P)
-        np.testing.assert_allclose(imm.mu[0], ref.mu, rtol=1e-7, atol=1e-12)
+    imm_equals_filterpy(imm, ref, turning_measurements(rng, 120, T, sigma))
     # the turn mode's own rate estimate follows the second half's -1 deg/s
     assert abs(math.degrees(imm.x_modes[0, 1, 4]) + 1.0) < 0.3
 
@@ -158,25 +169,10 @@ def test_imm_ct_three_modes_with_their_own_noise_equal_filterpy_imm():
     P0 = np.diag([100.0**2, 30.0**2, 100.0**2, 30.0**2, 0.01**2])
     mu0 = p.mu0()
     imm = IMM(**a, x0=x0[None], P0=P0, mu0=mu0, gate_probability=1.0)
-    filters = []
-    for j in range(3):
-        if j == 1:
-            filters.append(CTEKF(T, a["process_noise"][1], a["measurement_matrix"],
-                                 a["measurement_noise"], x0, P0))  # fmt: skip
-            continue
-        kf = KalmanFilter(dim_x=5, dim_z=2, dim_u=1)
-        kf.F, kf.Q = a["transitions"][j].copy(), a["process_noise"][j].copy()
-        kf.H, kf.R = a["measurement_matrix"].copy(), a["measurement_noise"].copy()
-        kf.B = a["offsets"][j][:, None].copy()
-        kf.x, kf.P = x0[:, None].copy(), P0.copy()
-        filters.append(kf)
+    ekf = CTEKF(T, a["process_noise"][1], a["measurement_matrix"], a["measurement_noise"], x0, P0)
+    filters = [linear_kf(a, 0, x0, P0), ekf, linear_kf(a, 2, x0, P0)]
     ref = IMMEstimator(filters, mu0.copy(), a["transition_matrix"].copy())
-    for z in turning_measurements(rng, 80, T, sigma):
-        imm.step(z[None])
-        ref.predict(u=np.ones((1, 1)))
-        ref.update(z[:, None])
-        scaled_close(imm.x[0], imm.P[0], ref.x[:, 0], ref.P)
-        np.testing.assert_allclose(imm.mu[0], ref.mu, rtol=1e-7, atol=1e-12)
+    imm_equals_filterpy(imm, ref, turning_measurements(rng, 80, T, sigma))
 
 
 @pytest.mark.parametrize("name", ["realistic", "turn-rate", "imm-ct"])
