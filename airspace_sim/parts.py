@@ -183,6 +183,8 @@ class Tracker(ABC):
     predicts_modes: ClassVar[bool] = False
     #: :meth:`step` needs the intruders' true states (perfect surveillance trackers)
     uses_truth: ClassVar[bool] = False
+    #: has :attr:`gated` (the world's track table counts a rejected measurement as a miss)
+    reports_gated: ClassVar[bool] = False
     #: number of modes M (1 for a single-model filter); an instance attribute is fine
     n_modes: int = 1
     #: names of the M modes, e.g. ("straight", "left", "right")
@@ -236,6 +238,12 @@ class Tracker(ABC):
         ``slots`` (R,): ``(xs (R, M, S, n), Ps (R, M, S, n, n))``. Only with
         ``predicts_modes``."""
         raise NotImplementedError(f"{type(self).__name__} does not predict modes")
+
+    @property
+    def gated(self) -> np.ndarray:
+        """(capacity,) bool, read-only: the last :meth:`step` rejected the slot's (finite)
+        measurement as explained by no mode (gating). Only with ``reports_gated``."""
+        raise NotImplementedError(f"{type(self).__name__} does not report gating")
 
 
 class Resolver(ABC):

@@ -84,6 +84,26 @@ def turning_measurements(rng, K, T, sigma):
     return np.array(zs)
 
 
+def linear_kf(a, j, x0, P0):
+    """filterpy's KalmanFilter for the linear mode ``j`` of IMM arguments ``a``."""
+    kf = KalmanFilter(dim_x=5, dim_z=2, dim_u=1)
+    kf.F, kf.Q = a["transitions"][j].copy(), a["process_noise"][j].copy()
+    kf.H, kf.R = a["measurement_matrix"].copy(), a["measurement_noise"].copy()
+    kf.B = a["offsets"][j][:, None].copy()
+    kf.x, kf.P = x0[:, None].copy(), P0.copy()
+    return kf
+
+
+def imm_equals_filterpy(imm, ref, zs):
+    """Step ``imm`` and filterpy's IMMEstimator ``ref`` on ``zs`` (K, 2), equal at each step."""
+    for z in zs:
+        imm.step(z[None])
+        ref.predict(u=np.ones((1, 1)))
+        ref.update(z[:, None])
+        scaled_close(imm.x[0], imm.P[0], ref.x[:, 0], ref.P)
+        np.testing.assert_allclose(imm.mu[0], ref.mu, rtol=1e-7, atol=1e-12)
+
+
 def scaled_close(x, P, rx, rP):
     s = np.sqrt(np.diag(rP))
     np.testing.assert_allclose(x / s, rx / s, rtol=1e-7, atol=1e-9)
@@ -123,24 +143,39 @@ def test_straight_and_estimated_turn_equal_filterpy_imm():
     imm = IMM(**a, x0=x0[None], P0=P0, mu0=mu0, gate_probability=1.0)
     assert imm.kernel == "loops"
     assert IMM.from_preset(p, x0[None], P0).mode_names == ("straight", "turn")
-    kf = KalmanFilter(dim_x=5, dim_z=2, dim_u=1)
-    kf.F, kf.Q = a["transitions"][0].copy(), a["process_noise"][0].copy()
-    kf.H, kf.R = a["measurement_matrix"].copy(), a["measurement_noise"].copy()
-    kf.B = a["offsets"][0][:, None].copy()
-    kf.x, kf.P = x0[:, None].copy(), P0.copy()
+    kf = linear_kf(a, 0, x0, P0)
     ekf = CTEKF(T, a["process_noise"][1], a["measurement_matrix"], a["measurement_noise"], x0, P0)
     ref = IMMEstimator([kf, ekf], mu0.copy(), a["transition_matrix"].copy())
-    for z in turning_measurements(rng, 120, T, sigma):
-        imm.step(z[None])
-        ref.predict(u=np.ones((1, 1)))
-        ref.update(z[:, None])
-        scaled_close(imm.x[0], imm.P[0], ref.x[:, 0], ref.P)
-        np.testing.assert_allclose(imm.mu[0], ref.mu, rtol=1e-7, atol=1e-12)
+    imm_equals_filterpy(imm, ref, turning_measurements(rng, 120, T, sigma))
     # the turn mode's own rate estimate follows the second half's -1 deg/s
     assert abs(math.degrees(imm.x_modes[0, 1, 4]) + 1.0) < 0.3
 
 
-@pytest.mark.parametrize("name", ["realistic", "turn-rate"])
+def test_imm_ct_three_modes_with_their_own_noise_equal_filterpy_imm():
+    """The imm-ct preset (quiet CV, estimated-rate CT, manoeuvring CV, each with its own
+    σ_a) against filterpy's IMMEstimator over a KalmanFilter, an EKF and a KalmanFilter
+    whose Q are the closed-form white-noise-acceleration matrices written here."""
+    rng = np.random.default_rng(6)
+    T, sigma = 4.0, 100.0
+    p = presets.get("imm-ct", dt=T).with_(measurement_sigma=sigma)
+    a = p.imm_arguments()
+    assert a["estimated_turn_rate"].tolist() == [False, True, False]
+    for j, sa in enumerate(p.filter_mode_sigma_accel):
+        q = sa**2 * np.array([[T**4 / 4, T**3 / 2], [T**3 / 2, T**2]])
+        np.testing.assert_allclose(a["process_noise"][j][np.ix_([0, 1], [0, 1])], q)
+        np.testing.assert_allclose(a["process_noise"][j][np.ix_([2, 3], [2, 3])], q)
+    assert a["process_noise"][1, 4, 4] == pytest.approx(p.ct_sigma_turn_rate**2 * T)
+    x0 = np.array([0.0, 150.0, 0.0, 60.0, 0.005])
+    P0 = np.diag([100.0**2, 30.0**2, 100.0**2, 30.0**2, 0.01**2])
+    mu0 = p.mu0()
+    imm = IMM(**a, x0=x0[None], P0=P0, mu0=mu0, gate_probability=1.0)
+    ekf = CTEKF(T, a["process_noise"][1], a["measurement_matrix"], a["measurement_noise"], x0, P0)
+    filters = [linear_kf(a, 0, x0, P0), ekf, linear_kf(a, 2, x0, P0)]
+    ref = IMMEstimator(filters, mu0.copy(), a["transition_matrix"].copy())
+    imm_equals_filterpy(imm, ref, turning_measurements(rng, 80, T, sigma))
+
+
+@pytest.mark.parametrize("name", ["realistic", "turn-rate", "imm-ct"])
 def test_step_with_dt_equals_model_built_at_dt(name):
     rng = np.random.default_rng(5)
     p = presets.get(name)
@@ -223,3 +258,33 @@ def test_a_start_far_from_the_measurements_warns_once():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         imm.step(z)  # once only
+
+
+def test_a_preset_s_tracker_model_is_separate_from_its_traffic():
+    """``Preset.tracker``: the world's tracker and IMM.from_preset run the tracker model (at
+    the preset's dt and σ), the traffic (truth generator, matched imm_arguments) the
+    preset's own modes, bit for bit as without a tracker model."""
+    from airspace_sim.dynamics import truth
+    from airspace_sim.world.trackers import ImmTracker
+
+    base = presets.get("realistic")
+    both = base.with_(tracker=presets.get("imm-ct"), dt=2.0, measurement_sigma=80.0)
+    own = base.with_(dt=2.0, measurement_sigma=80.0)
+    fm = both.filter_model()
+    assert (fm.name, fm.dt, fm.measurement_sigma, fm.n_modes) == ("imm-ct", 2.0, 80.0, 3)
+    np.testing.assert_array_equal(  # Π of the tracker's sojourns at the new dt
+        fm.transition_matrix, presets.get("imm-ct", dt=2.0).transition_matrix
+    )
+    for k, v in own.imm_arguments().items():
+        np.testing.assert_array_equal(both.imm_arguments()[k], v)
+    a = truth.simulate(own, 3, 50, rng=np.random.default_rng(1))
+    b = truth.simulate(both, 3, 50, rng=np.random.default_rng(1))
+    for name in ("states", "modes", "measurements"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    t = ImmTracker(both, 80.0)
+    assert t.n_modes == 3 and t.mode_names == fm.mode_names() and len(set(t.mode_names)) == 3
+    ref = ImmTracker(presets.get("imm-ct", dt=2.0), 80.0)
+    for name in ("_F", "_Q", "_U", "_Pi", "_R", "_ct"):
+        np.testing.assert_array_equal(getattr(t.imm, name), getattr(ref.imm, name))
+    x0 = np.array([[0.0, 150.0, 0.0, 60.0, 0.0]])
+    assert IMM.from_preset(both, x0, np.eye(5) * 100.0).mode_names == fm.mode_names()

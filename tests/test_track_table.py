@@ -51,9 +51,13 @@ def test_life_cycle_pending_two_point_misses_reuse_and_dead_aircraft():
     t = table(drop_after=2)
     alive = np.ones(N, dtype=bool)
     rng = np.random.default_rng(0)
+    # each pair's intruder flies a straight line (its measurements are inside the gate:
+    # a gated measurement counts as a miss)
+    start = {k: rng.uniform(-1e4, 1e4, 2) for k in ((0, 1), (0, 2), (1, 3), (3, 0))}
+    vel = {k: rng.uniform(-200.0, 200.0, 2) for k in start}
 
-    def z():
-        return rng.uniform(-1e4, 1e4, 2)
+    def z(pair, time):
+        return start[pair] + vel[pair] * time + rng.normal(0.0, SIGMA, 2)
 
     def upd(time, dets, scanned=True, alive=alive):
         o = np.array([d[0] for d in dets], dtype=np.int64)
@@ -61,10 +65,10 @@ def test_life_cycle_pending_two_point_misses_reuse_and_dead_aircraft():
         zz = np.array([d[2] for d in dets]).reshape(-1, 2)
         t.update(time, scanned, o, i, zz, alive)
 
-    a0, b0 = z(), z()
-    upd(0.0, [(0, 1, a0), (0, 2, b0), (1, 3, z())])
+    a0, b0 = z((0, 1), 0.0), z((0, 2), 0.0)
+    upd(0.0, [(0, 1, a0), (0, 2, b0), (1, 3, z((1, 3), 0.0))])
     assert len(t) == 0 and len(t.view()) == 0  # one detection is not a track yet
-    a1 = z()
+    a1 = z((0, 1), 1.0)
     upd(1.0, [(0, 1, a1)])
     assert len(t) == 1
     ref01 = reference(a0, a1, 1.0)
@@ -73,7 +77,7 @@ def test_life_cycle_pending_two_point_misses_reuse_and_dead_aircraft():
     np.testing.assert_array_equal(t.view().P[r], ref01.P[0])
     slot01 = int(t.view().slots[r])
     # (0, 2): pending since t = 0, detected again 2 s later (within 2 scans): Δt = 2 s
-    b2 = z()
+    b2 = z((0, 2), 2.0)
     upd(2.0, [(0, 2, b2)])
     ref01.step(np.full((1, 2), np.nan))
     ref02 = reference(b0, b2, 2.0)
@@ -89,28 +93,28 @@ def test_life_cycle_pending_two_point_misses_reuse_and_dead_aircraft():
     assert t.view().misses[track(t, 0, 1)] == 1
     np.testing.assert_array_equal(t.view().x[track(t, 0, 2)], ref02.x[0])
     # second missed scan: (0, 1) is dropped; (3, 0) detected for the first time
-    b3, c3 = z(), z()
+    b3, c3 = z((0, 2), 3.0), z((3, 0), 3.0)
     upd(3.0, [(0, 2, b3), (3, 0, c3)])
     assert track(t, 0, 1) is None and len(t) == 1
     ref02.step(b3[None])
     np.testing.assert_array_equal(t.view().x[track(t, 0, 2)], ref02.x[0])
     # (3, 0) starts in the freed slot; (0, 2) never moved
-    c4 = z()
-    upd(4.0, [(3, 0, c4), (0, 2, z())])
+    c4 = z((3, 0), 4.0)
+    upd(4.0, [(3, 0, c4), (0, 2, z((0, 2), 4.0))])
     v = t.view()
     assert int(v.slots[track(t, 3, 0)]) == slot01 and int(v.slots[track(t, 0, 2)]) == slot02
     np.testing.assert_array_equal(v.x[track(t, 3, 0)], reference(c3, c4, 1.0).x[0])
     # (1, 3): pending since t = 0, seen again at t = 5 (too late: 5 s > 2 scans) -> pending
     # again; at t = 6 the track starts from the t = 5 and t = 6 measurements
-    d5, d6 = z(), z()
-    upd(5.0, [(1, 3, d5), (3, 0, z()), (0, 2, z())])
+    d5, d6 = z((1, 3), 5.0), z((1, 3), 6.0)
+    upd(5.0, [(1, 3, d5), (3, 0, z((3, 0), 5.0)), (0, 2, z((0, 2), 5.0))])
     assert track(t, 1, 3) is None
-    upd(6.0, [(1, 3, d6), (3, 0, z()), (0, 2, z())])
+    upd(6.0, [(1, 3, d6), (3, 0, z((3, 0), 6.0)), (0, 2, z((0, 2), 6.0))])
     np.testing.assert_array_equal(t.view().x[track(t, 1, 3)], reference(d5, d6, 1.0).x[0])
     # aircraft 2 leaves: its track is dropped at once, the others stay
     gone = alive.copy()
     gone[2] = False
-    upd(7.0, [(1, 3, z()), (3, 0, z())], alive=gone)
+    upd(7.0, [(1, 3, z((1, 3), 7.0)), (3, 0, z((3, 0), 7.0))], alive=gone)
     v = t.view()
     assert sorted(zip(v.owner.tolist(), v.intruder.tolist(), strict=True)) == [(1, 3), (3, 0)]
     assert len(t) == len(v) == 2
@@ -219,3 +223,63 @@ def test_table_pickles_and_continues_bit_for_bit(kind):
         a, b = t.view(), c.view()
         for name in ("slots", "owner", "intruder", "misses", "age", "x", "mu", "P"):
             np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+
+
+def test_a_track_whose_measurements_are_all_gated_drops_in_the_world():
+    """A recorded flight that jumps 20 km (a position-source switch, a wrong icao24) is
+    detected on every scan after the jump, every measurement gated: the track counts each
+    gated update as a miss, so it drops at scan k + D − 1 (k the first gated scan, D
+    drop_after_misses), the next detection is pending and the one after starts a new track
+    at the new position (closed form from the module's life cycle)."""
+    import math
+
+    from airspace_sim.recorded.autopilot import Recording
+    from airspace_sim.recorded.flights import Flight, turn_rates
+    from airspace_sim.scenarios import AircraftSpec, from_dict
+    from airspace_sim.world import World
+
+    v, jump_s, jump_m, drop = 200.0, 60, 20000.0, 4
+    t = np.arange(0.0, 121.0)
+    ax, ay = -12000.0 + v * t, np.where(t >= jump_s, jump_m, 0.0)  # A flies east, then jumps
+    bx, by = np.full(t.size, 0.0), -15000.0 + v * t  # B flies north, tracks A
+    vx, vy = np.full(t.size, v), np.zeros(t.size)
+    alt = np.full(t.size, 10000.0)
+    a = Flight("A", "A", "", t, ax, ay, vx, vy, turn_rates(t, vx, vy), alt)
+    b = Flight("B", "B", "", t, bx, by, vy, vx, turn_rates(t, vy, vx), alt)
+
+    def spec(f):
+        return AircraftSpec(
+            id=f.id,
+            position=(float(f.x_m[0]), float(f.y_m[0])),
+            heading_deg=math.degrees(math.atan2(f.vy[0], f.vx[0])),
+            speed=v,
+            autopilot="recorded",
+            avoid=True,
+            recording=Recording(f, 0.0),
+        )
+
+    sc = from_dict(
+        {
+            "name": "jump",
+            "duration": 100.0,
+            "sensor": {"sigma": 20.0, "drop_after_misses": drop, "range": 60000.0},
+        }
+    )
+    w = World(sc, seed=1, aircraft=[spec(a), spec(b)])
+    seen = {}  # time -> (age, misses, position error m) of B's track of A
+    while not w.done:
+        w.step()
+        v_ = w.tracks.view()
+        i = np.flatnonzero((v_.owner == 1) & (v_.intruder == 0))
+        if i.size:
+            x = v_.x[i[0]]
+            err = math.hypot(x[0] - w.positions[0, 0], x[2] - w.positions[0, 1])
+            seen[round(w.time)] = (int(v_.age[i[0]]), int(v_.misses[i[0]]), err)
+    dropped_at = jump_s + drop - 1
+    assert sorted(set(range(1, 101)) - set(seen)) == [dropped_at, dropped_at + 1]
+    for k in range(jump_s, dropped_at):  # gated: one more miss per scan, the error stays
+        assert seen[k][1] == k - jump_s + 1 and seen[k][2] > 0.5 * jump_m
+    assert seen[jump_s - 1][1] == 0 and seen[jump_s - 1][2] < 200.0
+    restart = dropped_at + 2
+    assert seen[restart][0] == 0 and seen[restart][1] == 0  # a new track
+    assert all(seen[k][2] < 300.0 and seen[k][1] == 0 for k in range(restart, 101))

@@ -68,10 +68,13 @@ def test_retime_removes_report_time_jitter():
     assert np.sqrt(np.mean(err[5:-5] ** 2)) < 0.3  # from 0.87 s RMS jitter
 
 
-def test_evaluate_flags_turns_and_nis_is_consistent():
+@pytest.mark.parametrize("name", ["dense-turns", "imm-ct"])
+def test_evaluate_flags_turns_and_nis_is_consistent(name):
+    """Known-rate modes (dense-turns) and an estimated-rate mode (imm-ct: flagged by its
+    probability with its own Ω̂ beyond the flag rate) both flag the turns of the right sign."""
     t, X = flight(LEGS)
     truths = [evaluation.Truth("f", t, X), evaluation.Truth("g", t, X * [1, 1, -1, -1, -1])]
-    ev = evaluation.evaluate(truths, presets.get("dense-turns"), 50.0, 1.0, seed=3,
+    ev = evaluation.evaluate(truths, presets.get(name), 50.0, 1.0, seed=3,
                              cv_sigmas=(0.5, 2.0, 8.0))  # fmt: skip
     assert ev.n_flights == 2 and ev.cv_sigma in (0.5, 2.0, 8.0)
     assert ev.turning_flagged > 0.8 and ev.turning_flagged_wrong_sign < 0.05
@@ -80,7 +83,7 @@ def test_evaluate_flags_turns_and_nis_is_consistent():
     # the model fits the flights (its own rates, white noise): NIS near 2, loosely
     assert 1.5 < ev.nis < 3.0
     d = ev.to_dict()
-    assert d["preset"] == "dense-turns" and set(d["cv_grid"]) == {"0.5", "2.0", "8.0"}
+    assert d["preset"] == name and set(d["cv_grid"]) == {"0.5", "2.0", "8.0"}
 
 
 def test_no_long_segment_is_a_user_error():

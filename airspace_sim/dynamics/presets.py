@@ -54,6 +54,14 @@ class Preset:
         instead of the mode's known rate; their Ω is a random walk with
         ``ct_sigma_turn_rate`` (rad/s per √s) in the filter (Q_ΩΩ = σ² dt). The truth
         generator flies such a mode at its ``turn_rates`` entry.
+    filter_mode_sigma_accel : optional (M,) white-noise-acceleration σ_a (m/s²) of each
+        filter mode (e.g. a quiet and a manoeuvring constant-velocity mode); replaces
+        ``filter_process_noise`` in :meth:`imm_arguments`, rebuilt for every ``dt``.
+    tracker : optional preset, the model the tracker assumes (:meth:`filter_model`) when it
+        is not the traffic's: the traffic flies this preset's modes, and the world's and
+        the recorded-flight trackers run ``tracker``'s (its own modes, Π, Q), at this
+        preset's ``dt`` and ``measurement_sigma``. :meth:`imm_arguments` stays this
+        preset's own matched IMM (the simulated experiments' matched filter).
 
     Presets without the continuous-time fields (``seed``) hold per-step numbers, as the
     paper does: changing ``dt`` alone keeps Π and Q per step.
@@ -76,6 +84,8 @@ class Preset:
     sigma_turn_rate: float = 0.0
     estimated_turn_rate: tuple = None
     ct_sigma_turn_rate: float = 0.0
+    filter_mode_sigma_accel: tuple = None
+    tracker: Preset = None
 
     def __post_init__(self):
         where = f"preset {self.name!r}"
@@ -124,6 +134,16 @@ class Preset:
             if len(ct) != M:
                 raise UserError(f"{where}: estimated_turn_rate must have {M} flags, got {len(ct)}")
             set_("estimated_turn_rate", ct)
+        if self.filter_mode_sigma_accel is not None:
+            sa = np.asarray(self.filter_mode_sigma_accel, dtype=float).reshape(-1)
+            if sa.shape != (M,) or not np.all(np.isfinite(sa) & (sa >= 0)):
+                raise UserError(
+                    f"{where}: filter_mode_sigma_accel must be {M} non-negative m/s², "
+                    f"got {sa.tolist()}"
+                )
+            set_("filter_mode_sigma_accel", tuple(sa.tolist()))
+        if self.tracker is not None and not isinstance(self.tracker, Preset):
+            raise UserError(f"{where}: tracker must be a Preset, got {self.tracker!r}")
 
     @property
     def n_modes(self) -> int:
@@ -141,12 +161,16 @@ class Preset:
 
     def mode_names(self) -> tuple:
         """Names of the modes: ``straight``, ``left 3°/s``, ``right 1.5°/s`` (CCW positive),
-        ``turn`` for an estimated-rate mode."""
+        ``turn`` for an estimated-rate mode; modes alike but for their σ_a get it appended
+        (``straight 0.3 m/s²``)."""
         names = []
         for w, est in zip(self.turn_rates, self.estimated()):
             deg = math.degrees(abs(w))
             side = "left" if w > 0 else "right"
             names.append("turn" if est else "straight" if w == 0 else f"{side} {deg:.3g}°/s")
+        if len(set(names)) < len(names) and self.filter_mode_sigma_accel is not None:
+            # modes alike but for their noise (a quiet and a manoeuvring CV mode)
+            names = [f"{v} {sa:g} m/s²" for v, sa in zip(names, self.filter_mode_sigma_accel)]
         return tuple(names)
 
     def transitions(self) -> np.ndarray:
@@ -180,11 +204,32 @@ class Preset:
         p = np.clip(np.linalg.lstsq(A, b, rcond=None)[0], 0.0, None)
         return p / p.sum()
 
+    def filter_model(self) -> Preset:
+        """The model the tracker assumes: :attr:`tracker` at this preset's ``dt`` and
+        ``measurement_sigma`` if given, else this preset (its own matched filter)."""
+        if self.tracker is None:
+            return self
+        t = self.tracker
+        if t.dt == self.dt and t.measurement_sigma == self.measurement_sigma:
+            return t
+        return t.with_(dt=self.dt, measurement_sigma=self.measurement_sigma)
+
     def imm_arguments(self) -> dict:
         """Keyword arguments for :class:`~airspace_sim.tracking.IMM` except x0, P0, mu0
-        (``estimated_turn_rate`` and ``dt`` only for a preset with estimated-rate modes)."""
+        (``estimated_turn_rate`` and ``dt`` only for a preset with estimated-rate modes):
+        this preset's own modes (the tracker's, if it has one, are
+        ``filter_model().imm_arguments()``)."""
         est = self.estimated()
-        Q = np.broadcast_to(np.asarray(self.filter_process_noise), (self.n_modes, 5, 5)).copy()
+        if self.filter_mode_sigma_accel is None:
+            Q = np.broadcast_to(np.asarray(self.filter_process_noise), (self.n_modes, 5, 5))
+            Q = Q.copy()
+        else:
+            Q = np.stack(
+                [
+                    models.white_noise_acceleration(sa, self.dt, self.sigma_turn_rate)
+                    for sa in self.filter_mode_sigma_accel
+                ]
+            )
         Q[est, 4, 4] = self.ct_sigma_turn_rate**2 * self.dt
         # the estimated-rate flags and dt only when there are such modes, so the arguments
         # of a linear model stay those of any linear-Gaussian IMM (filterpy's included)
@@ -218,6 +263,10 @@ class Preset:
         new = replace(self, **changes)
         derived = {}
         touched = set(changes)
+        if new.tracker is not None and touched & {"dt", "measurement_sigma", "tracker"}:
+            derived["tracker"] = new.tracker.with_(
+                dt=new.dt, measurement_sigma=new.measurement_sigma
+            )
         if (
             new.sojourn_s is not None
             and "transition_matrix" not in changes
@@ -376,11 +425,38 @@ def turn_rate(dt: float = 1.0) -> Preset:
     )
 
 
+def imm_ct(dt: float = 1.0) -> Preset:
+    """The classic IMM-CT tracker (Bar-Shalom, Li & Kirubarajan 2001, §11.7): a quiet
+    constant-velocity mode, a coordinated turn at the estimated rate Ω (EKF, Ω a random
+    walk) and a manoeuvring constant-velocity mode, each with its own white-noise
+    acceleration; Ω pinned at 0 in both CV modes. The mode chain is in seconds (mean
+    sojourns), so Π follows ``dt``. A tracker, not a traffic model: as truth its turn
+    mode flies 2 °/s left. Numbers tuned on half the traffic calibration flights
+    (``docs/tracking.md``).
+    """
+    base = realistic(dt)
+    # quiet CV, CT, manoeuvring CV: leaving a mode goes mostly to the other "steady" one
+    switch = [[0.0, 0.8, 0.2], [0.8, 0.0, 0.2], [0.5, 0.5, 0.0]]
+    sojourn = (120.0, 60.0, 10.0)
+    return replace(
+        base,
+        name="imm-ct",
+        turn_rates=(0.0, math.radians(2.0), 0.0),
+        transition_matrix=_tup(markov.transition_matrix_from_sojourn(sojourn, dt, switch)),
+        sojourn_s=sojourn,
+        switch_probabilities=_tup(switch),
+        estimated_turn_rate=(False, True, False),
+        ct_sigma_turn_rate=math.radians(0.5),
+        filter_mode_sigma_accel=(0.3, 1.5, 5.0),
+    )
+
+
 PRESETS = {
     "seed": seed,
     "realistic": realistic,
     "dense-turns": dense_turns,
     "turn-rate": turn_rate,
+    "imm-ct": imm_ct,
 }
 
 

@@ -89,11 +89,10 @@ class ReplayStats:
         self._timeline = (
             Timeline([r.flight for r in recs], [r.offset_s for r in recs]) if recs else None
         )
-        preset = w.tracker_preset
+        preset = w.tracker_preset.filter_model()
         self.mode_rates = np.asarray(preset.turn_rates, dtype=float)
-        self.rule = (
-            "mode" if preset.pin_turn_rate and w.tracks.n_modes == preset.n_modes > 1 else "omega"
-        )
+        known = preset.pin_turn_rate and not preset.estimated().any()
+        self.rule = "mode" if known and w.tracks.n_modes == preset.n_modes > 1 else "omega"
         self.los = _Episodes()
         self.los3d = _Episodes()
         self.alerts = _Episodes()

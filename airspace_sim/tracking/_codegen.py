@@ -49,7 +49,7 @@ from numba import types
 from numba.extending import intrinsic
 
 #: Bump when the generated code changes, so stale cached sources are not reused.
-_VERSION = 12
+_VERSION = 13
 
 #: Trackers per chunk. The loop body holds a whole tracker, so the chunk only needs to fill
 #: the SIMD lanes a few times over; 16 keeps a chunk's work array in the L1 cache.
@@ -164,7 +164,8 @@ def generate(M: int, n: int, m: int, F_pattern, H_pattern, W: int) -> str:
 
     F_pattern: per mode, the (row, col) of the non-zeros of F_j in the order of the
     kernel's ``Fv[j, e]``; H_pattern: the (row, col) of the non-zeros of H in the order of
-    ``Hv[e]``. The kernel takes the arguments of :func:`._kernels.imm_step_kernel`'s.
+    ``Hv[e]``. The kernel takes the arguments of :func:`._kernels.imm_step_kernel`'s (one
+    signature for both kernels; ``ct`` and ``dt`` are unused: every mode is linear).
     """
     up = [(k, l) for k in range(n) for l in range(k, n)]  # upper triangle, row-major
     lay = _Layout()
@@ -214,7 +215,7 @@ def generate(M: int, n: int, m: int, F_pattern, H_pattern, W: int) -> str:
     e()
     e()
     e('@njit(cache=True, error_model="numpy")')
-    e("def imm_step(Fr, Fc, Fv, Fnnz, Q, U, Hr, Hc, Hv, R, Pi, gate_d2,")
+    e("def imm_step(Fr, Fc, Fv, Fnnz, Q, U, ct, dt, Hr, Hc, Hv, R, Pi, gate_d2,")
     e("             z, alive, xs, Ps, mus, x_o, P_o, mu_o, nis_o, ll_o, gated_o):")
     e.level += 1
     e(

@@ -13,12 +13,18 @@ recorded positions re-timed and smoothed over half a minute), position measureme
 Figures (:class:`Evaluation`): position and velocity RMSE overall and in turns, the IMM's
 average NIS against its χ²(2) band, and how often the IMM flags a turn. A second is
 *turning* when the truth's turn rate is at least :data:`TURNING_DEG_S` in magnitude and
-*straight* when it is below :data:`STRAIGHT_DEG_S`; the IMM *flags a turn* when the
-probability of its turning modes exceeds one half, and the flag has the right sign when its
-turn-rate estimate has the sign of the truth's. A second flag, for any tracker with Ω in
-its state, is the combined estimate ``|Ω̂| ≥`` :data:`RATE_FLAG_DEG_S` (an estimated-rate
-mode also fits straight flight, with Ω̂ ≈ 0, so its probability alone says less). Turn
-rates are counter-clockwise positive.
+*straight* when it is below :data:`STRAIGHT_DEG_S`; the IMM *flags a turn to the left*
+(right) when, by its own mixture, the aircraft turns left (right) at :data:`RATE_FLAG_DEG_S`
+or more with probability over one half:
+``Σ_j μ_j Pr_j(s Ω ≥ RATE_FLAG_DEG_S) > 1/2`` over the turning modes ``j``, with
+``Pr_j`` an indicator of the known rate for a known-rate mode and, for an estimated-rate
+(coordinated-turn) mode, the Gaussian probability ``Φ((s Ω̂_j − rate) / σ_Ωj)`` of its
+mode-conditioned estimate and variance. For known-rate modes this is "the turning modes of
+one side hold most of the probability"; an estimated-rate mode also fits straight flight
+(Ω̂ ≈ 0), so its probability counts only as far as its rate estimate says it turns. The
+flag is right when its side is the truth's. A second flag, for any tracker with Ω in its state, is the
+combined estimate ``|Ω̂| ≥`` :data:`RATE_FLAG_DEG_S`. Turn rates are counter-clockwise
+positive.
 
 Flights are given as arrays (times in seconds, east/north positions in metres in a local
 frame), so any reader can feed this module; the ``evaluate-tracker`` command reads files.
@@ -210,6 +216,21 @@ def _rmse(err) -> float:
     return float(np.sqrt(np.mean(np.sum(err**2, axis=-1)))) if err.size else float("nan")
 
 
+def turn_probabilities(imm, known, turning_modes, rate):
+    """(B,), (B,): the probability, by the IMM's mixture, of a left and of a right turn at
+    ``rate`` rad/s or more. known (M,) each mode's known turn rate (NaN: estimated, use the
+    mode's Ω̂ and its variance); turning_modes (M,) bool."""
+    from scipy.special import ndtr
+
+    w = imm.x_modes[..., 4]  # (B, M) Ω̂_j
+    sd = np.sqrt(np.maximum(imm.P_modes[..., 4, 4], 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        left = np.where(np.isnan(known), ndtr((w - rate) / sd), known >= rate)
+        right = np.where(np.isnan(known), ndtr((-w - rate) / sd), known <= -rate)
+    mu = np.where(turning_modes, imm.mu, 0.0)
+    return np.sum(mu * np.nan_to_num(left), axis=1), np.sum(mu * np.nan_to_num(right), axis=1)
+
+
 def evaluate(
     truths,
     preset,
@@ -222,8 +243,9 @@ def evaluate(
     """Run the preset's IMM and the CV grid on noisy measurements of ``truths``.
 
     ``truths``: :class:`Truth` segments sampled every ``period_s`` s; ``preset`` a
-    :class:`~airspace_sim.dynamics.presets.Preset` (its ``dt`` is replaced by
-    ``period_s``); measurements ``z = H x + N(0, σ² I)`` from
+    :class:`~airspace_sim.dynamics.presets.Preset` whose tracker model
+    (:meth:`~airspace_sim.dynamics.presets.Preset.filter_model`) is run, its ``dt``
+    replaced by ``period_s``; measurements ``z = H x + N(0, σ² I)`` from
     ``numpy.random.default_rng(seed)``. All flights run in one batch, aligned at their first
     sample; statistics skip the first :data:`BURN_IN_S` seconds of each.
 
@@ -236,7 +258,7 @@ def evaluate(
 
     if not truths:
         raise UserError("evaluate-tracker: no flight segment long enough to evaluate")
-    p = preset.with_(dt=period_s, measurement_sigma=sigma_m)
+    p = preset.with_(dt=period_s, measurement_sigma=sigma_m).filter_model()
     X = _stack(truths)
     T, F, _ = X.shape
     rng = np.random.default_rng(seed)
@@ -251,14 +273,17 @@ def evaluate(
 
     imm = IMM(**p.imm_arguments(), x0=x0, P0=P0, mu0=mu0, gate_probability=gate_probability)
     turning_modes = np.asarray(p.turning_modes(), dtype=bool)
+    known = np.where(p.estimated(), np.nan, np.asarray(p.turn_rates))  # NaN: estimated
+    flag_rate = math.radians(RATE_FLAG_DEG_S)
     est = np.full((T, F, models.N_STATE), np.nan)
-    p_turn = np.full((T, F), np.nan)
+    p_left = np.full((T, F), np.nan)
+    p_right = np.full((T, F), np.nan)
     nis = np.full((T, F), np.nan)
     gated = 0
     for k in range(2, T):
         imm.step(Z[k])
         est[k] = imm.x
-        p_turn[k] = imm.mu[:, turning_modes].sum(axis=1)
+        p_left[k], p_right[k] = turn_probabilities(imm, known, turning_modes, flag_rate)
         nis[k] = imm.nis
         gated += int(np.count_nonzero(imm.gated & ev[k]))
 
@@ -285,9 +310,10 @@ def evaluate(
     omega = np.degrees(X[..., 4])
     turning = ev & (np.abs(omega) >= TURNING_DEG_S)
     straight = ev & (np.abs(omega) < STRAIGHT_DEG_S)
-    flagged = p_turn > 0.5
+    left, rightward = p_left > 0.5, p_right > 0.5
+    flagged = left | rightward
+    right = (left & (X[..., 4] > 0)) | (rightward & (X[..., 4] < 0))
     same_sign = np.sign(est[..., 4]) == np.sign(X[..., 4])
-    right = flagged & same_sign
     by_rate = np.abs(np.degrees(est[..., 4])) >= RATE_FLAG_DEG_S
     e_imm, e_cv = est[..., :4] - X[..., :4], cv - X[..., :4]
     ni = nis[ev & np.isfinite(nis)]

@@ -499,8 +499,10 @@ class SlotIMM:
 
     @classmethod
     def from_preset(cls, preset, **kwargs) -> SlotIMM:
-        """The preset's matched IMM (:meth:`Preset.imm_arguments`); it can step with any
-        ``dt`` (:meth:`step`). ``kwargs``: ``gate_probability``, ``kernel``, ``capacity``."""
+        """The IMM of the preset's tracker model (:meth:`Preset.filter_model`: its own
+        matched IMM unless it names another); it can step with any ``dt`` (:meth:`step`).
+        ``kwargs``: ``gate_probability``, ``kernel``, ``capacity``."""
+        preset = preset.filter_model()
         imm = cls(**preset.imm_arguments(), mode_names=preset.mode_names(), **kwargs)
         imm._preset, imm._dt = preset, preset.dt
         return imm
@@ -549,11 +551,9 @@ class SlotIMM:
                 raise UserError(f"IMM step: dt must be a positive number of seconds, got {dt!r}")
             if step_dt != self._dt:
                 Fv, Q, U, Pi = self._model_at(step_dt)
-        head = (self._Fr, self._Fc, Fv, self._Fnnz, Q, U)
-        if self.kernel == "loops":
-            head = head + (self._ct, step_dt)
         self._kernel(
-            *head, self._Hr, self._Hc, self._Hv, self._R, Pi, self.gate_threshold,
+            self._Fr, self._Fc, Fv, self._Fnnz, Q, U, self._ct, step_dt,
+            self._Hr, self._Hc, self._Hv, self._R, Pi, self.gate_threshold,
             z, self._slots.alive, self._xs, self._Ps, self._mus,
             self._x, self._P, self._mu, self._nis, self._ll, self._gated,
         )  # fmt: skip
@@ -710,9 +710,10 @@ class IMM:
 
     @classmethod
     def from_preset(cls, preset, x0, P0, mu0=None, **kwargs) -> IMM:
-        """The preset's matched IMM (:meth:`Preset.imm_arguments`), trackers started at x0
-        (B, 5), P0, mu0 (default the preset's :meth:`~Preset.mu0`); it can step with any
-        ``dt`` (:meth:`step`). ``kwargs``: ``gate_probability``, ``kernel``."""
+        """The IMM of the preset's tracker model (:meth:`SlotIMM.from_preset`), trackers
+        started at x0 (B, 5), P0, mu0 (default that model's :meth:`~Preset.mu0`); it can
+        step with any ``dt`` (:meth:`step`). ``kwargs``: ``gate_probability``, ``kernel``."""
+        preset = preset.filter_model()
         s = SlotIMM.from_preset(preset, **kwargs)
         return cls(None, None, None, None, None, x0, P0, preset.mu0() if mu0 is None else mu0,
                    _slots=s)  # fmt: skip

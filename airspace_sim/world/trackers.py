@@ -11,9 +11,17 @@ Python objects, no sort of all tracks).
 Track life cycle (per scan):
 
 1. every live track is stepped with its measurement (none: predict only; between scans
-   every track is predicted only); ``misses`` counts consecutive missed scans;
+   every track is predicted only); ``misses`` counts consecutive scans that brought the
+   track no measurement it used: no detection, or a detection its tracker *gated* (no mode
+   explains it, :attr:`airspace_sim.parts.Tracker.gated`, for trackers that
+   ``reports_gated``). A gated update is a miss because a track that has lost its target
+   (e.g. a jump in a recording, or a manoeuvre its modes cannot follow) is otherwise
+   detected every scan, gates every measurement and never drops, while its target goes
+   untracked;
 2. tracks with ``misses ≥ drop_after_misses``, or whose owner or intruder left the world,
-   are dropped;
+   are dropped: a track detected on every scan whose measurements are all gated from scan
+   ``k`` on is dropped at scan ``k + drop_after_misses − 1``, and the next two detections
+   start a new one (pending at the scan after the drop, started at the one after that);
 3. a detection without a track is *pending*; the next detection of the same pair within
    ``drop_after_misses`` scans starts the track by two-point initialisation
    (:func:`airspace_sim.tracking.initialisation.two_point_initialisation`: position = last
@@ -80,9 +88,10 @@ def _measurements_by_slot(Z, slot_of_det, z):
 
 
 @njit(cache=True)
-def _advance(live, owner, intruder, misses, age, slot_of_det, scanned, drop_after, aircraft):
+def _advance(live, owner, intruder, misses, age, slot_of_det, gated, scanned, drop_after, aircraft):
     """One step of the per-slot bookkeeping (capacity,) arrays, in place: ``age`` + 1;
-    on a scan ``misses`` + 1, reset to 0 for the slots detected (``slot_of_det`` ≥ 0).
+    on a scan ``misses`` + 1, reset to 0 for the slots detected (``slot_of_det`` ≥ 0)
+    whose measurement the tracker used (not ``gated``, (capacity,) bool).
     Returns the live slots to drop: too many misses, or owner or intruder gone."""
     cap = live.size
     for s in range(cap):
@@ -91,8 +100,9 @@ def _advance(live, owner, intruder, misses, age, slot_of_det, scanned, drop_afte
         for s in range(cap):
             misses[s] += 1
         for d in range(slot_of_det.size):
-            if slot_of_det[d] >= 0:
-                misses[slot_of_det[d]] = 0
+            s = slot_of_det[d]
+            if s >= 0 and not gated[s]:
+                misses[s] = 0
     out = np.empty(cap, dtype=np.int64)
     k = 0
     for s in range(cap):
@@ -105,16 +115,19 @@ def _advance(live, owner, intruder, misses, age, slot_of_det, scanned, drop_afte
 
 
 def mode_names(preset: Preset) -> tuple[str, ...]:
-    """Names of the preset's modes: straight, left, right for the 3-mode presets."""
-    if preset.n_modes == 3:
+    """Names of the preset's modes: straight, left, right for the 3-mode presets of known
+    rates 0, +ω, −ω (the traffic's modes); else :meth:`Preset.mode_names`."""
+    w = preset.turn_rates
+    if preset.n_modes == 3 and not preset.estimated().any() and w[0] == 0 and w[1] == -w[2] > 0:
         return ("straight", "left", "right")
-    return tuple(f"mode{j}" for j in range(preset.n_modes))
+    return preset.mode_names()
 
 
 @register("tracker", "imm")
 class ImmTracker(parts.Tracker):
-    """The preset's matched IMM (:meth:`Preset.imm_arguments`) with R = σ² I, in slots
-    (:class:`~airspace_sim.tracking.imm.SlotIMM`); tracks start at the preset's ``mu0``.
+    """The IMM of the preset's tracker model (:meth:`Preset.filter_model`: the preset's
+    own matched IMM unless it names another) with R = σ² I, in slots
+    (:class:`~airspace_sim.tracking.imm.SlotIMM`); tracks start at that model's ``mu0``.
 
     Arrays are read-only views of the IMM's buffers, valid until the next step, birth or
     drop (:class:`SlotIMM`); free slots hold NaN.
@@ -129,20 +142,22 @@ class ImmTracker(parts.Tracker):
         )
 
     predicts_modes = True
+    reports_gated = True
 
     def __init__(self, preset: Preset, sigma: float, params=None):
-        p = preset.with_(measurement_sigma=max(float(sigma), 1e-3))
+        p = preset.with_(measurement_sigma=max(float(sigma), 1e-3)).filter_model()
         self.params = self.Params() if params is None else params
         self.imm = SlotIMM(**p.imm_arguments(), kernel=self.params.kernel)
         self._mu0 = p.mu0()
-        self.n_modes = preset.n_modes
-        self.mode_names = mode_names(preset)
+        self.n_modes = p.n_modes
+        self.mode_names = mode_names(p)
 
     capacity = property(lambda self: self.imm.capacity, doc="Number of lanes allocated.")
     alive = property(lambda self: self.imm.alive, doc="(capacity,) bool: live slots.")
     x = property(lambda self: self.imm.x, doc="(capacity, 5) posterior states by slot.")
     P = property(lambda self: self.imm.P, doc="(capacity, 5, 5) posterior covariances.")
     mu = property(lambda self: self.imm.mu, doc="(capacity, M) mode probabilities by slot.")
+    gated = property(lambda self: self.imm.gated, doc="(capacity,) bool: measurement gated.")
 
     def birth(self, x0, P0) -> np.ndarray:
         return self.imm.birth(x0, P0, self._mu0)
@@ -287,6 +302,7 @@ class TrackTable:
         self._pend_z = np.zeros((0, 2))
         self._pend_t = np.zeros(0)
         self._z = np.zeros((0, 2))
+        self._no_gate = np.zeros(0, dtype=np.bool_)  # ``gated`` of a tracker that never gates
         self._view = None
 
     @classmethod
@@ -301,8 +317,8 @@ class TrackTable:
         params=None,
     ) -> TrackTable:
         """The table of the registered tracker ``kind`` (:func:`make_tracker`), with the
-        initial Ω σ from ``preset``'s fastest turn (at least 3°/s)."""
-        rates = np.abs(np.asarray(preset.turn_rates, dtype=float))
+        initial Ω σ from the fastest turn of ``preset``'s tracker model (at least 3°/s)."""
+        rates = np.abs(np.asarray(preset.filter_model().turn_rates, dtype=float))
         omega = max(float(rates.max(initial=0.0)), MIN_TURN_RATE_SIGMA)
         tracker = make_tracker(kind, preset, sigma, params)
         return cls(n_aircraft, tracker, sigma, drop_after_misses, scan_period_s, omega)
@@ -360,10 +376,17 @@ class TrackTable:
             _measurements_by_slot(self._z, slot_of_det, z)
             truth = np.asarray(truth_states)[self._intruder] if t.uses_truth else None
             t.step(self._z, truth)
-            # 2. age, misses, drop
+            # 2. age, misses (a gated measurement is a miss), drop
+            if t.reports_gated:
+                gated = np.asarray(t.gated, dtype=np.bool_)
+            else:
+                if self._no_gate.size != cap:
+                    self._no_gate = np.zeros(cap, dtype=np.bool_)
+                gated = self._no_gate
             drop = _advance(
                 np.asarray(t.alive), self._owner, self._intruder, self._misses, self._age,
-                slot_of_det, bool(scanned), self.drop_after, np.asarray(alive, dtype=np.bool_),
+                slot_of_det, gated, bool(scanned), self.drop_after,
+                np.asarray(alive, dtype=np.bool_),
             )  # fmt: skip
             if drop.size:
                 self._drop(drop)

@@ -1,0 +1,86 @@
+"""Tune a tracker preset's filter on half the traffic calibration flights, report on the other.
+
+    python docs/benchmarks/tune_tracker.py DIR --split train --period 4 \\
+        --candidate '{"filter_mode_sigma_accel": [0.3, 0.5, 3.0]}' ...
+
+DIR holds the traffic 2.8.1 ``calibration/*.json.gz`` samples (never committed). Flights in
+name order: even positions are the training half, odd the test half. Each candidate is a
+JSON object of :class:`~airspace_sim.dynamics.presets.Preset` fields changed on ``--preset``
+(default imm-ct; ``ct_sigma_turn_rate`` in deg/s per √s here); one line per candidate:
+IMM / best-tuned CV position RMSE, turning and straight seconds flagged (right sign), NIS.
+The CV grid is searched once per run (all of CV_SIGMA_GRID).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from airspace_sim.dynamics import presets
+from airspace_sim.recorded import read
+from airspace_sim.tracking.consistency import CV_SIGMA_GRID
+from airspace_sim.tracking.evaluation import evaluate, resample
+
+SIGMA_BY_PERIOD = {1.0: 50.0, 4.0: 100.0}
+
+
+def split(directory: Path, half: str) -> list[Path]:
+    files = sorted(directory.glob("*.json.gz"))
+    return files[0::2] if half == "train" else files[1::2]
+
+
+def truths_of(files, period):
+    out = []
+    for path in files:
+        for f in read(path):
+            speed = np.hypot(f.vx, f.vy)
+            out += resample(f.id, f.t_s, f.x_m, f.y_m, period,
+                            speed_mps=speed if np.all(np.isfinite(speed)) else None)  # fmt: skip
+    return out
+
+
+def candidate(base, changes: dict):
+    changes = dict(changes)
+    if "ct_sigma_turn_rate" in changes:
+        changes["ct_sigma_turn_rate"] = math.radians(changes["ct_sigma_turn_rate"])
+    for k in ("filter_mode_sigma_accel", "sojourn_s"):
+        if k in changes:
+            changes[k] = tuple(changes[k])
+    if "switch_probabilities" in changes:
+        changes["switch_probabilities"] = tuple(map(tuple, changes["switch_probabilities"]))
+    return base.with_(**changes)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("directory", type=Path)
+    ap.add_argument("--split", choices=("train", "test"), default="train")
+    ap.add_argument("--period", type=float, default=4.0)
+    ap.add_argument("--preset", default="imm-ct")
+    ap.add_argument("--candidate", action="append", default=[])
+    a = ap.parse_args()
+    files = split(a.directory, a.split)
+    sigma = SIGMA_BY_PERIOD[a.period]
+    truths = truths_of(files, a.period)
+    base = presets.get(a.preset)
+    cv_grid = CV_SIGMA_GRID
+    for text in a.candidate or ["{}"]:
+        p = candidate(base, json.loads(text))
+        ev = evaluate(truths, p, sigma, a.period, cv_sigmas=cv_grid)
+        cv_grid = (ev.cv_sigma,)  # the best CV filter of this split and setting
+        print(
+            f"{a.split} {a.period:g}s {a.preset} {text}: ratio {ev.pos_imm / ev.pos_cv:.3f} "
+            f"(IMM {ev.pos_imm:.1f} m, CV {ev.pos_cv:.1f} m @ {ev.cv_sigma:g}) turning "
+            f"{100 * ev.turning_flagged:.1f}% straight {100 * ev.straight_flagged:.2f}% "
+            f"rate-flag {100 * ev.turning_rate_flagged:.1f}/{100 * ev.straight_rate_flagged:.2f}% "
+            f"NIS {ev.nis:.2f}",
+            flush=True,
+        )
+
+
+if __name__ == "__main__":
+    main()
