@@ -47,12 +47,11 @@ def train(config, iterations: int, checkpoint: str, progress: bool = False):
 
     algo = config.build_algo()
     t0 = time.perf_counter()
-    result = {}
     for _ in tqdm(range(iterations), desc="PPO iterations", disable=not progress):
         result = algo.train()
     seconds = time.perf_counter() - t0
     path = algo.save_to_path(os.path.abspath(checkpoint))
-    steps = int(result.get("num_agent_steps_sampled_lifetime", {}).get(MODULE_ID, 0) or 0)
+    steps = int(result["env_runners"]["num_module_steps_sampled_lifetime"][MODULE_ID])
     algo.stop()
     return path, seconds, steps, result
 
@@ -72,11 +71,13 @@ def main(argv=None):
     p.add_argument("--num-cpus", type=int, default=2, help="CPUs of the local Ray (default 2)")
     p.add_argument("--env-runners", type=int, default=2, help="EnvRunner actors (1 CPU each)")
     p.add_argument("--learners", type=int, default=0, help="remote learners (0: the driver)")
-    p.add_argument("--checkpoint", default="rllib-ring8", help="checkpoint directory")
+    p.add_argument("--checkpoint", help="checkpoint directory (default rllib-ring<train>)")
     p.add_argument("--from-checkpoint", help="skip training; evaluate this checkpoint")
     p.add_argument("--episodes", type=int, default=10, help="held-out episodes per setting")
     p.add_argument("--progress", action="store_true", help="tqdm progress bar while training")
     args = p.parse_args(argv)
+    if args.iterations < 1:
+        p.error(f"--iterations: at least 1, got {args.iterations}")
 
     checkpoint = args.from_checkpoint
     if checkpoint is None:
@@ -101,10 +102,10 @@ def main(argv=None):
             epochs=args.epochs,
         )
         checkpoint, seconds, steps, result = train(
-            config, args.iterations, args.checkpoint, args.progress
+            config, args.iterations, args.checkpoint or f"rllib-ring{args.train}", args.progress
         )
         ray.shutdown()
-        ret = result.get("env_runners", {}).get("episode_return_mean", float("nan"))
+        ret = result["env_runners"].get("episode_return_mean", float("nan"))
         print(
             f"trained {args.iterations} iterations ({steps} agent-steps) on ring{args.train} "
             f"in {seconds:.0f} s; last episode return (sum over agents) {ret:.2f}"
