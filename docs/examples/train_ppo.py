@@ -16,7 +16,7 @@ Evaluation: per policy and setting, the mean per episode of losses of separation
 (pair events, all aircraft; from ``World.metrics()``) and the mean return per agent.
 Policies: ``trained`` (deterministic actions), ``random`` (uniform in [-1, 1]),
 ``straight`` (0: hold the heading), ``built-in`` (``None``: the world's route autopilot and
-CDA resolver). Prints a Markdown table.
+CDA resolver); the helpers are in ``airspace_sim.env.evaluation``. Prints a Markdown table.
 """
 
 from __future__ import annotations
@@ -24,14 +24,7 @@ from __future__ import annotations
 import argparse
 import time
 
-import numpy as np
-
-from airspace_sim.env import parallel_env
-from airspace_sim.env.registration import ring_kwargs
-
-
-def make_env(n: int, **kw):
-    return parallel_env(**{**ring_kwargs(n), **kw})
+from airspace_sim.env.evaluation import batch_actor, evaluate, markdown_table, ring_env
 
 
 def train(args):
@@ -43,7 +36,7 @@ def train(args):
 
     torch.set_num_threads(1)
     venv = sb3_vec_env(
-        make_env(args.train),
+        ring_env(args.train),
         num_vec_envs=args.num_vec_envs,
         num_cpus=args.num_cpus,
     )
@@ -68,41 +61,6 @@ def train(args):
     return model, time.perf_counter() - t0
 
 
-def play(env, policy, seed, model=None, rng=None):
-    """One episode: (LoS events, NMAC events, mean return per agent)."""
-    obs, _ = env.reset(seed=seed)
-    ret = dict.fromkeys(env.agents, 0.0)
-    while env.agents:
-        if policy == "trained":
-            agents = list(env.agents)
-            act, _ = model.predict(np.stack([obs[a] for a in agents]), deterministic=True)
-            actions = dict(zip(agents, act))
-        elif policy == "random":
-            actions = {a: rng.uniform(-1, 1, 1).astype(np.float32) for a in env.agents}
-        elif policy == "straight":
-            actions = {a: np.zeros(1, np.float32) for a in env.agents}
-        else:
-            actions = {a: None for a in env.agents}
-        obs, rew, *_ = env.step(actions)
-        for a, r in rew.items():
-            ret[a] += r
-    m = env.world.metrics()
-    return m["los_events"], m["nmac_events"], float(np.mean(list(ret.values())))
-
-
-def evaluate(model, sizes, episodes):
-    rows = []
-    for n in sizes:
-        env = make_env(n)
-        for policy in ("trained", "random", "straight", "built-in"):
-            if policy == "trained" and model is None:
-                continue
-            rng = np.random.default_rng(0)
-            res = np.array([play(env, policy, 10_000 + k, model, rng) for k in range(episodes)])
-            rows.append((n, policy, *res.mean(axis=0), *res.std(axis=0)))
-    return rows
-
-
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--train", type=int, default=8, help="ring size trained on (default 8)")
@@ -122,18 +80,10 @@ def main(argv=None):
     print(f"trained {args.timesteps} agent-steps on ring{args.train} in {seconds:.0f} s")
     if args.save:
         model.save(args.save)
-    rows = evaluate(model, [args.train, *args.unseen], args.episodes)
+    act = batch_actor(lambda obs: model.predict(obs, deterministic=True)[0])
+    rows = evaluate(act, [args.train, *args.unseen], args.episodes)
     print()
-    print(f"Held-out seeds (10000..{10_000 + args.episodes - 1}), means per episode (± std):")
-    print()
-    print("| ring | policy | LoS | NMAC | return per agent |")
-    print("| --- | --- | --- | --- | --- |")
-    for n, policy, los, nmac, ret, s_los, s_nmac, s_ret in rows:
-        seen = "trained on" if n == args.train else "unseen"
-        print(
-            f"| {n} ({seen}) | {policy} | {los:.1f} ± {s_los:.1f} | {nmac:.1f} ± {s_nmac:.1f} "
-            f"| {ret:.2f} ± {s_ret:.2f} |"
-        )
+    print(markdown_table(rows, args.train, args.episodes))
 
 
 if __name__ == "__main__":
