@@ -283,3 +283,16 @@ def test_a_track_whose_measurements_are_all_gated_drops_in_the_world():
     restart = dropped_at + 2
     assert seen[restart][0] == 0 and seen[restart][1] == 0  # a new track
     assert all(seen[k][2] < 300.0 and seen[k][1] == 0 for k in range(restart, 101))
+
+
+def test_a_table_pickled_before_the_gating_rule_continues():
+    """A checkpoint's table from before ``_no_gate`` existed (truth tracker) still steps."""
+    import pickle
+
+    t = TrackTable.build(N, "truth", PRESET, SIGMA, 2, 1.0)
+    truth = np.zeros((N, 5))
+    t.update(0.0, True, [0], [1], np.zeros((1, 2)), np.ones(N, bool), truth)
+    t.__dict__.pop("_no_gate", None)  # as unpickled from an older version
+    t2 = pickle.loads(pickle.dumps(t))
+    t2.update(1.0, True, [0], [1], np.zeros((1, 2)), np.ones(N, bool), truth)
+    assert len(t2) == 1 and t2.view().misses.tolist() == [0]

@@ -273,6 +273,10 @@ class TrackTable:
     (:meth:`build` takes the preset's fastest turn, at least 3°/s).
     """
 
+    # ``gated`` of a tracker that never gates, resized by :meth:`update`; the class default
+    # serves tables pickled before it existed (checkpoints)
+    _no_gate = np.zeros(0, dtype=np.bool_)
+
     def __init__(
         self,
         n_aircraft: int,
@@ -302,7 +306,6 @@ class TrackTable:
         self._pend_z = np.zeros((0, 2))
         self._pend_t = np.zeros(0)
         self._z = np.zeros((0, 2))
-        self._no_gate = np.zeros(0, dtype=np.bool_)  # ``gated`` of a tracker that never gates
         self._view = None
 
     @classmethod
