@@ -349,6 +349,14 @@ def _encode_rows(order, slot, dist, x, P, mu, own_pos, own_vel, heading, rng_, r
         rank += 1
 
 
+def finish_in_place(layout: ObservationLayout, obs: np.ndarray) -> np.ndarray:
+    """:func:`finish` of a float64 buffer (..., size) that already holds both blocks:
+    NaN -> 0 and clipped in place; float32 (..., size)."""
+    obs[np.isnan(obs)] = 0.0
+    low, high = layout.bounds()
+    return np.clip(obs, low, high, out=obs).astype(np.float32)
+
+
 def finish(layout: ObservationLayout, own: np.ndarray, intruders: np.ndarray) -> np.ndarray:
     """Concatenate own (..., 14) and intruder (..., K, F) blocks, NaN -> 0, clip into the
     space's bounds; float32 (..., size)."""

@@ -303,7 +303,8 @@ class WorldMetrics:
         moved = travelled > 0
         self.flight_s += self.dt * int(np.count_nonzero(moved))
         self.speed = np.where(moved, travelled / self.dt, self.speed)
-        self.avoid_turn += np.where(following_policy, np.abs(turned), 0.0)
+        if following_policy.any():  # adding +0.0 elsewhere changes nothing: skip it
+            self.avoid_turn += np.where(following_policy, np.abs(turned), 0.0)
 
     def finished(self, time, finished):
         """Aircraft (N,) bool that finished their plan (a route's last waypoint reached) in

@@ -79,6 +79,16 @@ class Tracks:
                 self, name, _frozen(getattr(self, name), dtype, shape, f"tracks.{name}")
             )
 
+    @classmethod
+    def _of_view(cls, *arrays) -> Tracks:
+        """Tracks of a :class:`~.trackers.TrackView`'s arrays, in field order, read-only and
+        of the field dtypes (the caller checks), the view's shapes: not checked again (the
+        env reads them every step)."""
+        t = object.__new__(cls)
+        for f, a in zip(fields(cls), arrays):
+            object.__setattr__(t, f.name, a)
+        return t
+
     def __len__(self) -> int:
         return int(self.owner.size)
 
@@ -199,7 +209,16 @@ def live_tracks(world) -> Tracks:
     here too.
     """
     v = world.tracks.view()
-    return Tracks(v.owner, v.intruder, v.x, v.P, v.mu, v.misses, v.age)
+    arrays = (v.owner, v.intruder, v.x, v.P, v.mu, v.misses, v.age)
+    if all(a.dtype == d and not a.flags.writeable for a, d in zip(arrays, _TRACK_DTYPES)):
+        return Tracks._of_view(*arrays)
+    return Tracks(*arrays)
+
+
+#: dtypes of the :class:`Tracks` fields, in field order
+_TRACK_DTYPES = tuple(
+    np.dtype(d) for d in (np.int64, np.int64, float, float, float, np.int64, np.int64)
+)
 
 
 def _pairs(i, j) -> np.ndarray:

@@ -51,6 +51,8 @@ from airspace_sim.world.metrics import WorldMetrics
 from airspace_sim.world.policy import AvoidancePolicy
 from airspace_sim.world.trackers import TrackTable
 
+_EPS = np.finfo(float).eps  #: what np.sinc puts for a zero argument
+
 
 class World:
     """A running airspace scenario (see the module docstring for the step).
@@ -161,7 +163,7 @@ class World:
         # the phases after motion, for the initial positions (no tracking errors recorded)
         self._update_contact_flags()
         scan = self._surveillance()
-        self.tracks.update(self.time, *scan, self.active, self._true_states())
+        self.tracks.update(self.time, *scan, self.active, self._truth_for_tracker())
         self._detection()
         self._record_metrics(tracking=False)
 
@@ -193,7 +195,7 @@ class World:
         rate = self._commands(heading_rate)
         self._motion(rate)
         scan = self._surveillance()
-        self.tracks.update(self.time, *scan, self.active, self._true_states())
+        self.tracks.update(self.time, *scan, self.active, self._truth_for_tracker())
         self._detection()
         self._record_metrics()
 
@@ -244,8 +246,13 @@ class World:
         dt = self.dt
         turn = rate * dt
         mid = self.headings + 0.5 * turn
-        chord = self.speeds * np.sinc(turn / (2.0 * np.pi))
-        v = chord[:, None] * np.stack([np.cos(mid), np.sin(mid)], axis=1)
+        # np.sinc(turn / 2π) as numpy computes it (π·x, eps at 0), without its overhead
+        y = np.pi * (turn / (2.0 * np.pi))
+        y[y == 0.0] = _EPS
+        chord = self.speeds * (np.sin(y) / y)
+        v = np.empty((self.n, 2))
+        np.multiply(chord, np.cos(mid), out=v[:, 0])
+        np.multiply(chord, np.sin(mid), out=v[:, 1])
         if self._kinematic:
             v, turn, rate = self._kinematic_motion(v, turn, rate)
         v[~self.active] = 0.0
@@ -263,8 +270,8 @@ class World:
         for members, ap in self.autopilots:
             finished[members] = ap.after_step(state)
         gone = finished & self.active
-        self.metrics_acc.finished(self.time, gone)
         if gone.any():
+            self.metrics_acc.finished(self.time, gone)
             self.active[gone] = False
             self.airspace.remove(np.flatnonzero(gone))
         if self._kinematic:
@@ -361,9 +368,15 @@ class World:
 
     def _velocities(self) -> np.ndarray:
         """(N, 2) m/s from speeds and headings (0 for aircraft that left)."""
-        v = self.speeds[:, None] * np.stack([np.cos(self.headings), np.sin(self.headings)], axis=1)
+        v = np.empty((self.n, 2))
+        np.multiply(self.speeds, np.cos(self.headings), out=v[:, 0])
+        np.multiply(self.speeds, np.sin(self.headings), out=v[:, 1])
         v[~self.active] = 0.0
         return v
+
+    def _truth_for_tracker(self):
+        """:meth:`_true_states` for a tracker that ``uses_truth``, else None (not built)."""
+        return self._true_states() if self.tracks.tracker.uses_truth else None
 
     def _true_states(self) -> np.ndarray:
         """(N, 5) true ``[x, vx, y, vy, Ω]``."""
