@@ -188,6 +188,11 @@ def _pair_scan(ids, cx, cy, pos, vel, following, n_key, dmod2, hmd2, tau_mod, r_
     return wcv[:nw], pred[:nq]
 
 
+#: up to this many active aircraft, :meth:`WorldMetrics.safety` tests all their pairs
+#: (at most 496) instead of building the grid, whose set-up costs more than that
+_ONE_CELL = 32
+
+
 class WorldMetrics:
     """The accumulators of one world run (definitions in the module docstring).
 
@@ -340,7 +345,25 @@ class WorldMetrics:
         # non-finite positions fail every test of the pair scan: leave them off the grid
         ids = np.flatnonzero(self._active & np.isfinite(pos).all(axis=1))
         wcv = pred = np.zeros(0, dtype=np.int64)
-        if ids.size > 1:
+        if 1 < ids.size <= _ONE_CELL:
+            # few aircraft: every pair in one cell (the flags are exact tests, the grid
+            # only skips pairs that cannot be flagged), no grid to build
+            zero = np.zeros(ids.size, dtype=np.int64)
+            wcv, pred = _pair_scan(
+                ids,
+                zero,
+                zero,
+                pos,
+                vel,
+                np.ascontiguousarray(following, dtype=np.bool_),
+                n_key,
+                self.dmod**2,
+                self.hmd**2,
+                self.tau_mod,
+                self.r_safe**2,
+                float(lookahead_s),
+            )
+        elif ids.size > 1:
             speed = np.hypot(vel[ids, 0], vel[ids, 1])
             speed = speed[np.isfinite(speed)]
             reach = pair_reach(
