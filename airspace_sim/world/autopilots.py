@@ -129,6 +129,9 @@ class RouteAutopilot(Autopilot):
         self._rows = np.arange(n)
         self._no_waypoints = bool((self.count == 0).any())
         self._legs = None  # _Legs of the current index and done; see _target
+        # (FlightState, (k,) rad) of the last desired_heading: turn_rate asks for it and the
+        # world again with the same state object (a new one every phase)
+        self._desired = None
 
     def _target(self):
         """``(target, leg start)`` (k, 2) m of each member's current leg. What depends only
@@ -150,10 +153,16 @@ class RouteAutopilot(Autopilot):
         return self._legs.target, self._legs.start
 
     def desired_heading(self, state):
+        last = self._desired
+        if last is not None and last[0] is state:  # the world asks twice per FlightState
+            return last[1]
         tgt, _ = self._target()
         d = tgt - state.positions[self.members]
         h = np.arctan2(d[:, 1], d[:, 0])
-        return np.where(self._legs.hold, self.heading0, h)
+        out = np.where(self._legs.hold, self.heading0, h)
+        out.flags.writeable = False
+        self._desired = (state, out)
+        return out
 
     def turn_rate(self, state):
         return _toward(self.desired_heading(state), state, self.members)
@@ -171,7 +180,7 @@ class RouteAutopilot(Autopilot):
                 break
             self.index = self.index + hit
             self.done |= hit & (self.index >= self.count)
-            self._legs = None
+            self._legs = self._desired = None
         return self.done.copy()
 
     def progress(self, state):

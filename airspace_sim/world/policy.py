@@ -113,8 +113,9 @@ class AvoidancePolicy:
         follow = np.zeros(n, dtype=bool)
         resuming = np.zeros(n, dtype=bool)
         out = rate
-        if self.overrides:
-            flying = (self.avoid if avoid is None else avoid) & active
+        flying = (self.avoid if avoid is None else avoid) & active if self.overrides else None
+        anyone = flying is not None and bool(flying.any())
+        if anyone:
             follow = flying & self.conflict
             out = np.where(follow, self.advice / self.dt, rate)
             # resume toward the autopilot's heading only if that turn is clear
@@ -134,7 +135,10 @@ class AvoidancePolicy:
                     out[hold] = 0.0
                     follow[hold] = True
         self.following = follow
-        self.off_route_s = np.where(follow | resuming, self.off_route_s + self.dt, 0.0)
+        if anyone:
+            self.off_route_s = np.where(follow | resuming, self.off_route_s + self.dt, 0.0)
+        else:  # nobody follows or resumes
+            self.off_route_s = np.zeros(n)
         return out
 
     def _resume_clear(self, enc: Encounters, velocities, turn, max_heading_change):

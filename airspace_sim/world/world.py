@@ -160,6 +160,7 @@ class World:
         )
         self.in_los = np.zeros(n, dtype=bool)
         self.nmac = np.zeros(n, dtype=bool)
+        self._last_pairs = None  # (owner, intruder, pair keys) of the last scan
         # the phases after motion, for the initial positions (no tracking errors recorded)
         self._update_contact_flags()
         scan = self._surveillance()
@@ -336,9 +337,26 @@ class World:
         intruder = np.concatenate([j, i])
         keep = self.trackers_on[owner] & self.active[owner] & self.active[intruder]
         owner, intruder = owner[keep], intruder[keep]
-        pk = streams.pair_keys(self.keys, owner, intruder)
+        pk = self._pair_keys(owner, intruder)
         z, det = self.sensor.measure(owner, intruder, self.positions, pk, self.step_count)
         return True, owner[det], intruder[det], z[det]
+
+    def _pair_keys(self, owner, intruder) -> np.ndarray:
+        """:func:`.streams.pair_keys` of these (D,) pairs; the last scan's are used again
+        when its pairs were the same (a pure function of the pairs; the pairs in range
+        change far less often than every scan)."""
+        last = self._last_pairs
+        if (
+            last is not None
+            and last[0].size == owner.size
+            and np.array_equal(last[0], owner)
+            and np.array_equal(last[1], intruder)
+        ):
+            return last[2]
+        pk = streams.pair_keys(self.keys, owner, intruder)
+        pk.flags.writeable = False
+        self._last_pairs = (owner, intruder, pk)
+        return pk
 
     def _record_metrics(self, tracking: bool = True) -> None:
         """Phase 6: contacts, conflicts and (``tracking``) track errors."""
