@@ -396,12 +396,11 @@ class AirspaceParallelEnv(ParallelEnv):
         for members, ap in self._route_aps:
             planned[members] = ap.planned
         self._planned = planned
-        self._idx_of = {}  # tuple of agents -> (A,) aircraft indices (see _indices)
+        self._idx_of = {}  # tuple of agents -> ((A,) aircraft indices, all in order)
         # per-world constants of the observations and rewards
         rate = w.max_turn_rate
         self._per_step = rate * w.dt
         self._turns = rate > 0
-        self._steers = self._per_step > 0
         self.num_cycles = 0
         self._route, self._covered = self._route_state()
         if self._renderer is not None:
@@ -498,13 +497,17 @@ class AirspaceParallelEnv(ParallelEnv):
 
     def _indices(self, agents) -> np.ndarray:
         """(A,) int64 world indices of ``agents`` (kept per list of agents: read-only)."""
+        return self._indices_full(agents)[0]
+
+    def _indices_full(self, agents) -> tuple[np.ndarray, bool]:
+        """``(idx, full)``: :meth:`_indices` and whether they are every aircraft in order."""
         key = tuple(agents)
-        idx = self._idx_of.get(key)
-        if idx is None:
+        got = self._idx_of.get(key)
+        if got is None:
             idx = np.array([self._index[a] for a in agents], dtype=np.int64)
             idx.flags.writeable = False
-            self._idx_of[key] = idx
-        return idx
+            got = self._idx_of[key] = (idx, np.array_equal(idx, np.arange(self.world.n)))
+        return got
 
     def _decode(self, acting, actions) -> np.ndarray:
         """(A,) turn fractions (NaN: built-in) of the acting agents' actions. The common
@@ -535,50 +538,42 @@ class AirspaceParallelEnv(ParallelEnv):
 
     # ----------------------------------------------------------- observation
     def _observe_all(self, agents) -> dict:
-        """Observations of ``agents`` (see :mod:`.spaces` for the layout), batched: the own
-        block written column by column into one (A, size) buffer, the intruder block by
-        :func:`.spaces.encode_intruders_batch`."""
+        """Observations of ``agents`` (see :mod:`.spaces` for the layout), batched into one
+        (A, size) buffer: the own block by :func:`.spaces.encode_own_rows`, the intruder
+        block by :func:`.spaces.encode_intruders_batch`."""
         agents = list(agents)
         if not agents:
             return {}
         w = self.world
         lay = self.observation_layout
-        idx = self._indices(agents)
+        idx, everyone = self._indices_full(agents)
         pos, vel = w.positions[idx], w.velocities[idx]
-        heading, advice = w.headings[idx], w.advice[idx]
+        heading = w.headings[idx]
         _, _, cross, bearing, dist = self._route
-        has_wp = np.isfinite(dist[idx])
-        every_wp = bool(has_wp.all())
         rel_b = wrap_angle(bearing[idx] - heading)
-        per_step, steers = self._per_step[idx], self._steers[idx]
-        conflict = w.conflict[idx]
         obs = np.empty((idx.size, lay.size))
-        c = obs.T  # c[k]: column k of the own block (a view)
-        np.divide(w.speeds[idx], sp.V_REF, out=c[0])
-        # (transcendentals into contiguous arrays first, as numpy's SIMD loops expect)
-        c[1] = np.sin(heading)
-        c[2] = np.cos(heading)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            c[3] = np.where(self._turns[idx], w.turn_rates[idx] / w.max_turn_rate[idx], 0.0)
-            adv = np.where(steers & np.isfinite(advice), advice / per_step, 0.0)
-            route = np.where(has_wp & steers, rel_b / per_step, 0.0)
-        np.divide(cross[idx], 10 * lay.r_safe, out=c[4])
-        if every_wp:
-            c[5] = np.sin(rel_b)
-            c[6] = np.cos(rel_b)
-            np.divide(dist[idx], 2 * lay.sensor_range, out=c[7])
-        else:
-            c[5] = np.where(has_wp, np.sin(rel_b), 0.0)
-            c[6] = np.where(has_wp, np.cos(rel_b), 1.0)
-            c[7] = np.where(has_wp, np.where(has_wp, dist[idx], 0.0) / (2 * lay.sensor_range), 0.0)
-        c[8] = has_wp
-        c[9] = adv
-        c[10] = conflict
-        c[11] = w.in_los[idx]
-        np.clip(route, -1.0, 1.0, out=c[12])
-        c[13] = np.where(conflict, adv, c[12])
+        sp.encode_own_rows(
+            idx,
+            w.speeds,
+            w.turn_rates,
+            w.max_turn_rate,
+            self._per_step,
+            w.advice,
+            cross,
+            dist,
+            w.conflict,
+            w.in_los,
+            np.sin(heading),
+            np.cos(heading),
+            rel_b,
+            np.sin(rel_b),
+            np.cos(rel_b),
+            10 * lay.r_safe,
+            2 * lay.sensor_range,
+            obs,
+        )
         tr = live_tracks(w)
-        if self._everyone(idx):
+        if everyone:  # track owners are already rows of this batch
             rows = slice(None)
             slot = tr.owner
         else:
@@ -592,15 +587,6 @@ class AirspaceParallelEnv(ParallelEnv):
         obs[:, lay.own_size :] = intr.reshape(idx.size, -1)
         obs = sp.finish_in_place(lay, obs)
         return dict(zip(agents, obs))
-
-    def _everyone(self, idx) -> bool:
-        """``idx`` is every aircraft of the world, in order (then rows need no remapping)."""
-        n = self.world.n
-        return (
-            idx.size == n
-            and bool(idx[0] == 0 and idx[-1] == n - 1)
-            and (n < 3 or bool((np.diff(idx) == 1).all()))
-        )
 
     def _infos(self, agents, idx) -> dict[str, dict[str, Any]]:
         """Per-agent info dicts: time s, step, conflict, in_los, nmac, advice rad,

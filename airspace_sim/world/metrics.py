@@ -398,8 +398,10 @@ class WorldMetrics:
         else:
             began = int(wcv.size)
         self._wcv_prev = wcv
-        self._wcv_ever.put(wcv, np.zeros(wcv.size, dtype=np.int64))
-        self._predicted.put(pred, np.zeros(pred.size, dtype=np.int64))
+        if wcv.size:  # (putting nothing changes nothing)
+            self._wcv_ever.put(wcv, np.zeros(wcv.size, dtype=np.int64))
+        if pred.size:
+            self._predicted.put(pred, np.zeros(pred.size, dtype=np.int64))
         self.wcv_events += began
         self.wcv_pair_steps += int(wcv.size)
 

@@ -85,8 +85,8 @@ class Tracks:
         of the field dtypes (the caller checks), the view's shapes: not checked again (the
         env reads them every step)."""
         t = object.__new__(cls)
-        for f, a in zip(fields(cls), arrays):
-            object.__setattr__(t, f.name, a)
+        for name, a in zip(_TRACK_FIELDS, arrays):
+            object.__setattr__(t, name, a)
         return t
 
     def __len__(self) -> int:
@@ -210,15 +210,16 @@ def live_tracks(world) -> Tracks:
     """
     v = world.tracks.view()
     arrays = (v.owner, v.intruder, v.x, v.P, v.mu, v.misses, v.age)
-    if all(a.dtype == d and not a.flags.writeable for a, d in zip(arrays, _TRACK_DTYPES)):
+    if [a.dtype for a in arrays] == _TRACK_DTYPES and not any(a.flags.writeable for a in arrays):
         return Tracks._of_view(*arrays)
     return Tracks(*arrays)
 
 
 #: dtypes of the :class:`Tracks` fields, in field order
-_TRACK_DTYPES = tuple(
-    np.dtype(d) for d in (np.int64, np.int64, float, float, float, np.int64, np.int64)
-)
+_TRACK_DTYPES = [np.dtype(d) for d in (np.int64, np.int64, float, float, float, np.int64, np.int64)]
+
+
+_TRACK_FIELDS = tuple(f.name for f in fields(Tracks))
 
 
 def _pairs(i, j) -> np.ndarray:
