@@ -433,25 +433,27 @@ class AirspaceParallelEnv(ParallelEnv):
             return {}, {}, {}, {}, {}
         w = self.world
         acting = list(self.agents)
-        idx = self._indices(acting)
+        idx, everyone = self._indices_full(acting)
+        # every aircraft in order: views instead of gathers (the same values)
+        sel = slice(None) if everyone else idx
         frac = self._decode(acting, actions)
         rates = np.full(w.n, np.nan)
-        rates[idx] = frac * w.max_turn_rate[idx]
+        rates[sel] = frac * w.max_turn_rate[sel]
         w.step(rates)
         self.num_cycles += 1
 
         self._route, covered = self._route_state()
-        done = self._route[1][idx]
-        gained = (covered - self._covered)[idx]
+        done = self._route[1][sel]
+        gained = (covered - self._covered)[sel]
         self._covered = covered
-        L = self._planned[idx]
+        L = self._planned[sel]
         has_route = L > 0
         Ls = np.where(has_route, L, 1.0)
-        travel = np.where(has_route, w.speeds[idx] * w.dt / Ls, 0.0)
+        travel = np.where(has_route, w.speeds[sel] * w.dt / Ls, 0.0)
         nearest = self._nearest(idx)
         with np.errstate(invalid="ignore", divide="ignore"):
-            turn = np.where(self._turns[idx], w.turn_rates[idx] / w.max_turn_rate[idx], 0.0)
-        nmac = w.nmac[idx]
+            turn = np.where(self._turns[sel], w.turn_rates[sel] / w.max_turn_rate[sel], 0.0)
+        nmac = w.nmac[sel]
         wts = self.reward_weights
         # (A, terms) weighted terms in DEFAULT_WEIGHTS order, column by column
         weighted = np.empty((idx.size, len(self._term_names)))
@@ -464,7 +466,7 @@ class AirspaceParallelEnv(ParallelEnv):
         else:
             value = np.zeros(idx.size)
         np.multiply(wts["nmac"], value, out=col["nmac"])
-        np.multiply(wts["conflict"], -w.conflict[idx].astype(float), out=col["conflict"])
+        np.multiply(wts["conflict"], -w.conflict[sel].astype(float), out=col["conflict"])
         np.multiply(wts["heading_change"], -(turn**2), out=col["heading_change"])
         along = gained / Ls
         np.multiply(wts["progress"], np.where(has_route, along, 0.0), out=col["progress"])
@@ -474,8 +476,8 @@ class AirspaceParallelEnv(ParallelEnv):
         names = self._term_names
         total = weighted.sum(axis=1).tolist()
         weighted = weighted.tolist()
-        ended = (nmac | done | ~w.active[idx]).tolist()
-        infos = self._infos(acting, idx)
+        ended = (nmac | done | ~w.active[sel]).tolist()
+        infos = self._infos(acting, sel)
         rewards, terms, truncs = {}, {}, {}
         for k, a in enumerate(acting):
             rewards[a] = total[k]
@@ -547,10 +549,11 @@ class AirspaceParallelEnv(ParallelEnv):
         w = self.world
         lay = self.observation_layout
         idx, everyone = self._indices_full(agents)
-        pos, vel = w.positions[idx], w.velocities[idx]
-        heading = w.headings[idx]
+        sel = slice(None) if everyone else idx  # views instead of gathers (same values)
+        pos, vel = w.positions[sel], w.velocities[sel]
+        heading = w.headings[sel]
         _, _, cross, bearing, dist = self._route
-        rel_b = wrap_angle(bearing[idx] - heading)
+        rel_b = wrap_angle(bearing[sel] - heading)
         obs = np.empty((idx.size, lay.size))
         sp.encode_own_rows(
             idx,
@@ -590,7 +593,8 @@ class AirspaceParallelEnv(ParallelEnv):
 
     def _infos(self, agents, idx) -> dict[str, dict[str, Any]]:
         """Per-agent info dicts: time s, step, conflict, in_los, nmac, advice rad,
-        waypoint_index (the caller adds reward terms)."""
+        waypoint_index (the caller adds reward terms); ``idx`` the agents' aircraft (an
+        index array or a slice)."""
         w = self.world
         time, step = float(w.time), int(w.step_count)
         cols = zip(
