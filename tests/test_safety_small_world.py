@@ -1,30 +1,12 @@
 """Safety metrics of small worlds (all pairs of up to 32 active aircraft tested at once,
 no grid; world/metrics.py) against brute-force scalar re-computations."""
 
-import math
-
 import numpy as np
 import pytest
+from test_safety_metrics import _predicted_scalar, _wcv_scalar
 
 from airspace_sim.world.bodies import LOS, NMAC, RANGE
-from airspace_sim.world.metrics import DMOD_M, HMD_M, TAU_MOD_S, WorldMetrics
-
-
-def _wcv(s, v):
-    ss, sv, vv = s @ s, s @ v, v @ v
-    if ss <= DMOD_M**2:
-        return True
-    if sv >= 0:
-        return False
-    if (DMOD_M**2 - ss) / sv > TAU_MOD_S:
-        return False
-    return ss - sv * sv / vv <= HMD_M**2
-
-
-def _predicted(s, v, r_safe, lookahead):
-    vv = v @ v
-    t = min(max(-(s @ v) / vv, 0.0), lookahead) if vv > 0 else 0.0
-    return math.hypot(*(s + t * v)) < r_safe
+from airspace_sim.world.metrics import WorldMetrics
 
 
 @pytest.mark.parametrize("n, active_share", [(2, 1.0), (12, 0.8), (32, 0.9), (33, 1.0)])
@@ -48,9 +30,9 @@ def test_small_world_flags_match_brute_force(n, active_share):
             if not (active[i] and active[j]):
                 continue
             s, v = pos[j] - pos[i], vel[j] - vel[i]
-            if _wcv(s, v):
+            if _wcv_scalar(s, v):
                 wcv.add(i * n + j)
-            if not following[i] and not following[j] and _predicted(s, v, r_safe, look):
+            if not following[i] and not following[j] and _predicted_scalar(s, v, r_safe, look):
                 pred.add(i * n + j)
     if n >= 12:
         assert wcv and pred

@@ -348,21 +348,7 @@ class WorldMetrics:
         if 1 < ids.size <= _ONE_CELL:
             # few aircraft: every pair in one cell (the flags are exact tests, the grid
             # only skips pairs that cannot be flagged), no grid to build
-            zero = np.zeros(ids.size, dtype=np.int64)
-            wcv, pred = _pair_scan(
-                ids,
-                zero,
-                zero,
-                pos,
-                vel,
-                np.ascontiguousarray(following, dtype=np.bool_),
-                n_key,
-                self.dmod**2,
-                self.hmd**2,
-                self.tau_mod,
-                self.r_safe**2,
-                float(lookahead_s),
-            )
+            cx = cy = np.zeros(ids.size, dtype=np.int64)
         elif ids.size > 1:
             speed = np.hypot(vel[ids, 0], vel[ids, 1])
             speed = speed[np.isfinite(speed)]
@@ -376,10 +362,12 @@ class WorldMetrics:
             cx = np.floor(pos[ids, 0] / reach).astype(np.int64)
             cy = np.floor(pos[ids, 1] / reach).astype(np.int64)
             order = np.lexsort((cy, cx))
+            ids, cx, cy = ids[order], cx[order], cy[order]
+        if ids.size > 1:
             wcv, pred = _pair_scan(
-                ids[order],
-                cx[order],
-                cy[order],
+                ids,
+                cx,
+                cy,
                 pos,
                 vel,
                 np.ascontiguousarray(following, dtype=np.bool_),
