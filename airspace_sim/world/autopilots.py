@@ -133,6 +133,14 @@ class RouteAutopilot(Autopilot):
         # world again with the same state object (a new one every phase)
         self._desired = None
 
+    def __setstate__(self, state):
+        """Unpickle; the kept leg geometry is derived state, rebuilt (also for an autopilot
+        pickled before it was kept, e.g. in an older checkpoint)."""
+        self.__dict__.update(state)
+        self._rows = np.arange(self.members.size)
+        self._no_waypoints = bool((self.count == 0).any())
+        self._legs = self._desired = None
+
     def _target(self):
         """``(target, leg start)`` (k, 2) m of each member's current leg. What depends only
         on ``index`` and ``done`` is kept (:attr:`_legs`) until :meth:`after_step` moves an

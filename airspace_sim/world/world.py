@@ -168,6 +168,12 @@ class World:
         self._detection()
         self._record_metrics(tracking=False)
 
+    def __setstate__(self, state):
+        """Unpickle; a world pickled before the scan's pair keys were kept (an older
+        checkpoint) starts with none kept."""
+        state.setdefault("_last_pairs", None)
+        self.__dict__.update(state)
+
     # ------------------------------------------------------------ read-only
     @property
     def advice(self) -> np.ndarray:
