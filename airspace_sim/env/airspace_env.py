@@ -236,6 +236,7 @@ class AirspaceParallelEnv(ParallelEnv):
         self.render_mode = render_mode
         self.max_cycles = max_cycles if max_cycles is not None else self.scenario.n_steps
         self.reward_weights = rw.merge_weights(reward)
+        self._term_names = list(rw.DEFAULT_WEIGHTS)
         self._default_seed = self.scenario.seed if seed is None else seed
         self._seed_rng = None  # draws world seeds for reset(seed=None) after the first
         self._renderer = None
@@ -347,27 +348,26 @@ class AirspaceParallelEnv(ParallelEnv):
         self._variants[key] = variant
         return variant
 
-    def _route_geometry(self):
+    def _route_state(self):
         """Route state of the live world's aircraft, (N,) arrays: ``(index, done, cross m,
         bearing rad, distance m)`` as :meth:`RouteAutopilot.route_geometry` (index 0, not
-        done, NaN distance for aircraft that fly another autopilot)."""
+        done, NaN distance for aircraft that fly another autopilot), and (N,) metres of
+        route covered (0 for aircraft without a route), both from
+        :meth:`RouteAutopilot.route_state`."""
         w = self.world
+        state = w.flight_state()
+        if self._route_everyone:  # one route autopilot flies every aircraft, in order
+            g = self._route_aps[0][1].route_state(state)
+            return g[:5], g[5]
         n = w.n
         index, done = np.zeros(n, np.int64), np.zeros(n, bool)
         cross, bearing, dist = np.zeros(n), np.zeros(n), np.full(n, np.nan)
-        state = w.flight_state()
+        covered = np.zeros(n)
         for members, ap in self._route_aps:
-            g = ap.route_geometry(state)
-            index[members], done[members], cross[members], bearing[members], dist[members] = g
-        return index, done, cross, bearing, dist
-
-    def _route_progress(self) -> np.ndarray:
-        """(N,) metres of route covered (0 for aircraft without a route)."""
-        out = np.zeros(self.world.n)
-        state = self.world.flight_state()
-        for members, ap in self._route_aps:
-            out[members] = ap.progress(state)
-        return out
+            g = ap.route_state(state)
+            index[members], done[members], cross[members], bearing[members] = g[:4]
+            dist[members], covered[members] = g[4], g[5]
+        return (index, done, cross, bearing, dist), covered
 
     # ----------------------------------------------------------------- reset
     def reset(self, seed: int | None = None, options: dict | None = None):
@@ -389,17 +389,24 @@ class AirspaceParallelEnv(ParallelEnv):
         self._index = {aid: i for i, aid in enumerate(w.ids)}
         self.agents = [a for a in self.possible_agents if a in self._index]
         self._route_aps = [(m, ap) for m, ap in w.autopilots if isinstance(ap, RouteAutopilot)]
+        self._route_everyone = len(self._route_aps) == 1 and np.array_equal(
+            self._route_aps[0][0], np.arange(w.n)
+        )
         planned = np.zeros(w.n)
         for members, ap in self._route_aps:
             planned[members] = ap.planned
         self._planned = planned
+        self._idx_of = {}  # tuple of agents -> ((A,) aircraft indices, all in order)
+        # per-world constants of the observations and rewards
+        rate = w.max_turn_rate
+        self._per_step = rate * w.dt
+        self._turns = rate > 0
         self.num_cycles = 0
-        self._route = self._route_geometry()
-        self._covered = self._route_progress()
+        self._route, self._covered = self._route_state()
         if self._renderer is not None:
             self._renderer.reset()
         obs = self._observe_all(self.agents)
-        idx = np.array([self._index[a] for a in self.agents], dtype=np.int64)
+        idx = self._indices(self.agents)
         infos = self._infos(self.agents, idx)
         zero = rw.weighted_terms(self.reward_weights, {})
         for info in infos.values():
@@ -426,49 +433,51 @@ class AirspaceParallelEnv(ParallelEnv):
             return {}, {}, {}, {}, {}
         w = self.world
         acting = list(self.agents)
-        idx = np.array([self._index[a] for a in acting], dtype=np.int64)
+        idx, everyone = self._indices_full(acting)
+        # every aircraft in order: views instead of gathers (the same values)
+        sel = slice(None) if everyone else idx
         frac = self._decode(acting, actions)
         rates = np.full(w.n, np.nan)
-        rates[idx] = frac * w.max_turn_rate[idx]
+        rates[sel] = frac * w.max_turn_rate[sel]
         w.step(rates)
         self.num_cycles += 1
 
-        self._route = self._route_geometry()
-        done = self._route[1][idx]
-        covered = self._route_progress()
-        gained = (covered - self._covered)[idx]
+        self._route, covered = self._route_state()
+        done = self._route[1][sel]
+        gained = (covered - self._covered)[sel]
         self._covered = covered
-        L = self._planned[idx]
+        L = self._planned[sel]
         has_route = L > 0
         Ls = np.where(has_route, L, 1.0)
-        travel = np.where(has_route, w.speeds[idx] * w.dt / Ls, 0.0)
-        c_max = rw.step_bound(self.reward_weights, travel)
+        travel = np.where(has_route, w.speeds[sel] * w.dt / Ls, 0.0)
         nearest = self._nearest(idx)
-        mx = w.max_turn_rate[idx]
         with np.errstate(invalid="ignore", divide="ignore"):
-            turn = np.where(mx > 0, w.turn_rates[idx] / mx, 0.0)
-        nmac = w.nmac[idx]
-        values = {
-            "los": -rw.severity(nearest, w.r_safe, w.nmac_distance),
-            "nmac": np.where(
-                nmac,
-                rw.nmac_value(self.reward_weights, self.max_cycles - self.num_cycles + 1, c_max),
-                0,
-            ),
-            "conflict": -w.conflict[idx].astype(float),
-            "heading_change": -(turn**2),
-            "progress": np.where(has_route, gained / Ls, 0.0),
-            "path": np.where(has_route, gained / Ls - travel, 0.0),
-            "arrival": done.astype(float),
-        }
-        truncated = self.num_cycles >= self.max_cycles
+            turn = np.where(self._turns[sel], w.turn_rates[sel] / w.max_turn_rate[sel], 0.0)
+        nmac = w.nmac[sel]
         wts = self.reward_weights
-        names = list(rw.DEFAULT_WEIGHTS)
-        weighted = np.stack([wts[n] * values[n] for n in names], axis=1)  # (A, terms)
+        # (A, terms) weighted terms in DEFAULT_WEIGHTS order, column by column
+        weighted = np.empty((idx.size, len(self._term_names)))
+        col = dict(zip(self._term_names, weighted.T))
+        np.multiply(wts["los"], -rw.severity(nearest, w.r_safe, w.nmac_distance), out=col["los"])
+        if nmac.any():
+            c_max = rw.step_bound(wts, travel)
+            steps_left = self.max_cycles - self.num_cycles + 1
+            value = np.where(nmac, rw.nmac_value(wts, steps_left, c_max), 0)
+        else:
+            value = np.zeros(idx.size)
+        np.multiply(wts["nmac"], value, out=col["nmac"])
+        np.multiply(wts["conflict"], -w.conflict[sel].astype(float), out=col["conflict"])
+        np.multiply(wts["heading_change"], -(turn**2), out=col["heading_change"])
+        along = gained / Ls
+        np.multiply(wts["progress"], np.where(has_route, along, 0.0), out=col["progress"])
+        np.multiply(wts["path"], np.where(has_route, along - travel, 0.0), out=col["path"])
+        np.multiply(wts["arrival"], done.astype(float), out=col["arrival"])
+        truncated = self.num_cycles >= self.max_cycles
+        names = self._term_names
         total = weighted.sum(axis=1).tolist()
         weighted = weighted.tolist()
-        ended = (nmac | done | ~w.active[idx]).tolist()
-        infos = self._infos(acting, idx)
+        ended = (nmac | done | ~w.active[sel]).tolist()
+        infos = self._infos(acting, sel)
         rewards, terms, truncs = {}, {}, {}
         for k, a in enumerate(acting):
             rewards[a] = total[k]
@@ -487,6 +496,20 @@ class AirspaceParallelEnv(ParallelEnv):
         if self.render_mode == "human":
             self.render()
         return obs, rewards, terms, truncs, infos
+
+    def _indices(self, agents) -> np.ndarray:
+        """(A,) int64 world indices of ``agents`` (kept per list of agents: read-only)."""
+        return self._indices_full(agents)[0]
+
+    def _indices_full(self, agents) -> tuple[np.ndarray, bool]:
+        """``(idx, full)``: :meth:`_indices` and whether they are every aircraft in order."""
+        key = tuple(agents)
+        got = self._idx_of.get(key)
+        if got is None:
+            idx = np.array([self._index[a] for a in agents], dtype=np.int64)
+            idx.flags.writeable = False
+            got = self._idx_of[key] = (idx, np.array_equal(idx, np.arange(self.world.n)))
+        return got
 
     def _decode(self, acting, actions) -> np.ndarray:
         """(A,) turn fractions (NaN: built-in) of the acting agents' actions. The common
@@ -517,59 +540,61 @@ class AirspaceParallelEnv(ParallelEnv):
 
     # ----------------------------------------------------------- observation
     def _observe_all(self, agents) -> dict:
-        """Observations of ``agents`` (see :mod:`.spaces` for the layout), batched."""
+        """Observations of ``agents`` (see :mod:`.spaces` for the layout), batched into one
+        (A, size) buffer: the own block by :func:`.spaces.encode_own_rows`, the intruder
+        block by :func:`.spaces.encode_intruders_batch`."""
         agents = list(agents)
         if not agents:
             return {}
         w = self.world
         lay = self.observation_layout
-        idx = np.array([self._index[a] for a in agents], dtype=np.int64)
-        pos, vel = w.positions[idx], w.velocities[idx]
-        heading, speed, advice = w.headings[idx], w.speeds[idx], w.advice[idx]
-        max_rate = w.max_turn_rate[idx]
-        _, _, cross, bearing, dist = (g[idx] for g in self._route)
-        has_wp = np.isfinite(dist)
-        rel_b = wrap_angle(bearing - heading)
-        dist = np.where(has_wp, dist, 0.0)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            per_step = max_rate * w.dt
-            rate = np.where(max_rate > 0, w.turn_rates[idx] / max_rate, 0.0)
-            adv = np.where((per_step > 0) & np.isfinite(advice), advice / per_step, 0.0)
-            route = np.where(has_wp & (per_step > 0), rel_b / per_step, 0.0)
-        route = np.clip(route, -1.0, 1.0)
-        conflict = w.conflict[idx]
-        own = np.stack(
-            [
-                speed / sp.V_REF,
-                np.sin(heading),
-                np.cos(heading),
-                rate,
-                cross / (10 * lay.r_safe),
-                np.where(has_wp, np.sin(rel_b), 0.0),
-                np.where(has_wp, np.cos(rel_b), 1.0),
-                np.where(has_wp, dist / (2 * lay.sensor_range), 0.0),
-                has_wp.astype(float),
-                adv,
-                conflict.astype(float),
-                w.in_los[idx].astype(float),
-                route,
-                np.where(conflict, adv, route),
-            ],
-            axis=1,
+        idx, everyone = self._indices_full(agents)
+        sel = slice(None) if everyone else idx  # views instead of gathers (same values)
+        pos, vel = w.positions[sel], w.velocities[sel]
+        heading = w.headings[sel]
+        _, _, cross, bearing, dist = self._route
+        rel_b = wrap_angle(bearing[sel] - heading)
+        obs = np.empty((idx.size, lay.size))
+        sp.encode_own_rows(
+            idx,
+            w.speeds,
+            w.turn_rates,
+            w.max_turn_rate,
+            self._per_step,
+            w.advice,
+            cross,
+            dist,
+            w.conflict,
+            w.in_los,
+            np.sin(heading),
+            np.cos(heading),
+            rel_b,
+            np.sin(rel_b),
+            np.cos(rel_b),
+            10 * lay.r_safe,
+            2 * lay.sensor_range,
+            obs,
         )
         tr = live_tracks(w)
-        slot_of = np.full(w.n, -1, dtype=np.int64)  # aircraft -> row in this batch
-        slot_of[idx] = np.arange(len(idx))
-        rows = np.flatnonzero(slot_of[tr.owner] >= 0)
+        if everyone:  # track owners are already rows of this batch
+            rows = slice(None)
+            slot = tr.owner
+        else:
+            slot_of = np.full(w.n, -1, dtype=np.int64)  # aircraft -> row in this batch
+            slot_of[idx] = np.arange(idx.size)
+            rows = np.flatnonzero(slot_of[tr.owner] >= 0)
+            slot = slot_of[tr.owner[rows]]
         intr = sp.encode_intruders_batch(
-            lay, slot_of[tr.owner[rows]], pos, vel, heading, tr.x[rows], tr.P[rows], tr.mu[rows]
+            lay, slot, pos, vel, heading, tr.x[rows], tr.P[rows], tr.mu[rows]
         )
-        obs = sp.finish(lay, own, intr)
-        return {a: obs[k] for k, a in enumerate(agents)}
+        obs[:, lay.own_size :] = intr.reshape(idx.size, -1)
+        obs = sp.finish_in_place(lay, obs)
+        return dict(zip(agents, obs))
 
     def _infos(self, agents, idx) -> dict[str, dict[str, Any]]:
         """Per-agent info dicts: time s, step, conflict, in_los, nmac, advice rad,
-        waypoint_index (the caller adds reward terms)."""
+        waypoint_index (the caller adds reward terms); ``idx`` the agents' aircraft (an
+        index array or a slice)."""
         w = self.world
         time, step = float(w.time), int(w.step_count)
         cols = zip(

@@ -349,6 +349,72 @@ def _encode_rows(order, slot, dist, x, P, mu, own_pos, own_vel, heading, rng_, r
         rank += 1
 
 
+@njit(cache=True, error_model="numpy")
+def encode_own_rows(
+    idx,
+    speeds,
+    turn_rates,
+    max_rate,
+    per_step,
+    advice,
+    cross,
+    dist,
+    conflict,
+    in_los,
+    sin_h,
+    cos_h,
+    rel_b,
+    sin_rb,
+    cos_rb,
+    cross_scale,
+    dist_scale,
+    out,
+):
+    """The own block (:data:`OWN_NAMES`) of A ownships, written into ``out[:, :14]``.
+
+    idx (A,) int: the ownships' aircraft indices into the (N,) world arrays ``speeds`` m/s,
+    ``turn_rates`` and ``max_rate`` rad/s, ``per_step`` rad (largest heading change per
+    step), ``advice`` rad, ``cross`` m, ``dist`` m (NaN: no waypoint ahead), ``conflict``
+    and ``in_los`` bool. Per ownship (A,): ``sin_h``, ``cos_h`` of the heading, ``rel_b``
+    rad bearing to the waypoint relative to the heading and its ``sin_rb``, ``cos_rb``
+    (numpy's, so the values are numpy's bit for bit). ``cross_scale`` = 10·r_safe and
+    ``dist_scale`` = 2·sensor range, m.
+    """
+    for k in range(idx.size):
+        i = idx[k]
+        row = out[k]
+        has_wp = math.isfinite(dist[i])
+        steers = per_step[i] > 0.0
+        adv = advice[i] / per_step[i] if steers and math.isfinite(advice[i]) else 0.0
+        route = rel_b[k] / per_step[i] if has_wp and steers else 0.0
+        if route < -1.0:
+            route = -1.0
+        elif route > 1.0:
+            route = 1.0
+        row[0] = speeds[i] / V_REF
+        row[1] = sin_h[k]
+        row[2] = cos_h[k]
+        row[3] = turn_rates[i] / max_rate[i] if max_rate[i] > 0.0 else 0.0
+        row[4] = cross[i] / cross_scale
+        row[5] = sin_rb[k] if has_wp else 0.0
+        row[6] = cos_rb[k] if has_wp else 1.0
+        row[7] = dist[i] / dist_scale if has_wp else 0.0
+        row[8] = 1.0 if has_wp else 0.0
+        row[9] = adv
+        row[10] = 1.0 if conflict[i] else 0.0
+        row[11] = 1.0 if in_los[i] else 0.0
+        row[12] = route
+        row[13] = adv if conflict[i] else route
+
+
+def finish_in_place(layout: ObservationLayout, obs: np.ndarray) -> np.ndarray:
+    """:func:`finish` of a float64 buffer (..., size) that already holds both blocks:
+    NaN -> 0 and clipped in place; float32 (..., size)."""
+    obs[np.isnan(obs)] = 0.0
+    low, high = layout.bounds()
+    return np.clip(obs, low, high, out=obs).astype(np.float32)
+
+
 def finish(layout: ObservationLayout, own: np.ndarray, intruders: np.ndarray) -> np.ndarray:
     """Concatenate own (..., 14) and intruder (..., K, F) blocks, NaN -> 0, clip into the
     space's bounds; float32 (..., size)."""

@@ -51,6 +51,19 @@ def _toward(target_heading, state, members):
     return np.clip(wrap_angle(target_heading - h) / state.dt, -lim, lim)
 
 
+@dataclass
+class _Legs:
+    """What a :class:`RouteAutopilot` derives from ``index`` and ``done`` (k members)."""
+
+    w: np.ndarray  #: (k,) int, waypoint column of the current leg
+    target: np.ndarray  #: (k, 2) m, the waypoint flown to
+    start: np.ndarray  #: (k, 2) m, where the leg starts
+    leg: np.ndarray  #: (k, 2) m, target − start
+    length: np.ndarray  #: (k,) m
+    hold: np.ndarray  #: (k,) bool, no waypoint ahead: hold the initial heading
+    ahead: np.ndarray  #: (k,) bool, a waypoint ahead
+
+
 @register("autopilot", "straight")
 class StraightAutopilot(Autopilot):
     """Holds the initial heading (and turns back to it after an avoidance manoeuvre)."""
@@ -113,17 +126,51 @@ class RouteAutopilot(Autopilot):
         self.planned = leg.sum(axis=1)
         self.done = np.zeros(n, dtype=bool)
         self.modes = None
+        self._rows = np.arange(n)
+        self._no_waypoints = bool((self.count == 0).any())
+        self._legs = None  # _Legs of the current index and done; see _target
+        # (FlightState, (k,) rad) of the last desired_heading: turn_rate asks for it and the
+        # world again with the same state object (a new one every phase)
+        self._desired = None
+
+    def __setstate__(self, state):
+        """Unpickle; the kept leg geometry is derived state, rebuilt (also for an autopilot
+        pickled before it was kept, e.g. in an older checkpoint)."""
+        self.__dict__.update(state)
+        self._rows = np.arange(self.members.size)
+        self._no_waypoints = bool((self.count == 0).any())
+        self._legs = self._desired = None
 
     def _target(self):
-        rows = np.arange(self.members.size)
-        w = np.minimum(self.index, self.wp.shape[1] - 1)
-        return self.wp[rows, w], self.prev[rows, w]
+        """``(target, leg start)`` (k, 2) m of each member's current leg. What depends only
+        on ``index`` and ``done`` is kept (:attr:`_legs`) until :meth:`after_step` moves an
+        index: the world and the env read it about six times a step."""
+        if self._legs is None:
+            w = np.minimum(self.index, self.wp.shape[1] - 1)
+            tgt, prev = self.wp[self._rows, w], self.prev[self._rows, w]
+            leg = tgt - prev
+            self._legs = _Legs(
+                w,
+                tgt,
+                prev,
+                leg,
+                np.hypot(leg[:, 0], leg[:, 1]),
+                (self.count == 0) | self.done,
+                (self.count > 0) & ~self.done,
+            )
+        return self._legs.target, self._legs.start
 
     def desired_heading(self, state):
+        last = self._desired
+        if last is not None and last[0] is state:  # the world asks twice per FlightState
+            return last[1]
         tgt, _ = self._target()
         d = tgt - state.positions[self.members]
         h = np.arctan2(d[:, 1], d[:, 0])
-        return np.where((self.count == 0) | self.done, self.heading0, h)
+        out = np.where(self._legs.hold, self.heading0, h)
+        out.flags.writeable = False
+        self._desired = (state, out)
+        return out
 
     def turn_rate(self, state):
         return _toward(self.desired_heading(state), state, self.members)
@@ -137,18 +184,25 @@ class RouteAutopilot(Autopilot):
             near = np.hypot(to_wp[:, 0], to_wp[:, 1]) <= step_len
             passed = np.einsum("ij,ij->i", to_wp, tgt - prev) < 0.0
             hit = (near | passed) & ~self.done & (self.count > 0)
+            if not hit.any():  # nothing moved: a second pass would find the same
+                break
             self.index = self.index + hit
             self.done |= hit & (self.index >= self.count)
+            self._legs = self._desired = None
         return self.done.copy()
 
     def progress(self, state):
+        return self._progress(state.positions[self.members])
+
+    def _progress(self, pos):
+        """:meth:`progress` at the members' positions ``pos`` (k, 2) m."""
         tgt, _ = self._target()
-        rows = np.arange(self.members.size)
-        w = np.minimum(self.index, self.wp.shape[1] - 1)
-        remaining = np.linalg.norm(tgt - state.positions[self.members], axis=1) + self.tail[rows, w]
+        remaining = np.linalg.norm(tgt - pos, axis=1) + self.tail[self._rows, self._legs.w]
         out = np.where(self.done, self.planned, self.planned - remaining)
+        if not self._no_waypoints:
+            return out
         # no waypoints: progress along the initial heading, like "straight"
-        d = state.positions[self.members] - self.start
+        d = pos - self.start
         along = d[:, 0] * np.cos(self.heading0) + d[:, 1] * np.sin(self.heading0)
         return np.where(self.count == 0, along, out)
 
@@ -167,12 +221,19 @@ class RouteAutopilot(Autopilot):
         Read it after :meth:`after_step` of the same step (as the world does), so that
         ``index`` belongs to the positions in ``state``.
         """
-        tgt, prev = self._target()
+        return self._route_geometry(state.positions[self.members])
+
+    def route_state(self, state):
+        """:meth:`route_geometry` and :meth:`progress` in one call (the env reads both
+        every step): ``(index, done, cross_track, bearing, distance, progress)``."""
         pos = state.positions[self.members]
-        ahead = (self.count > 0) & ~self.done
-        leg = tgt - prev
+        return self._route_geometry(pos) + (self._progress(pos),)
+
+    def _route_geometry(self, pos):
+        """:meth:`route_geometry` at the members' positions ``pos`` (k, 2) m."""
+        tgt, prev = self._target()
+        ahead, leg, length = self._legs.ahead, self._legs.leg, self._legs.length
         rel = pos - prev
-        length = np.hypot(leg[:, 0], leg[:, 1])
         with np.errstate(invalid="ignore", divide="ignore"):
             cross = np.where(
                 length > 1e-9, (leg[:, 0] * rel[:, 1] - leg[:, 1] * rel[:, 0]) / length, 0.0

@@ -210,6 +210,11 @@ def _closest_pair_distance(keys, n, positions):  # pragma: no cover - compiled
     return best
 
 
+#: up to this many active aircraft, :meth:`WorldMetrics.safety` tests all their pairs
+#: (at most 496) instead of building the grid, whose set-up costs more than that
+_ONE_CELL = 32
+
+
 class WorldMetrics:
     """The accumulators of one world run (definitions in the module docstring).
 
@@ -324,7 +329,8 @@ class WorldMetrics:
         moved = travelled > 0
         self.flight_s += self.dt * int(np.count_nonzero(moved))
         self.speed = np.where(moved, travelled / self.dt, self.speed)
-        self.avoid_turn += np.where(following_policy, np.abs(turned), 0.0)
+        if following_policy.any():  # adding +0.0 elsewhere changes nothing: skip it
+            self.avoid_turn += np.where(following_policy, np.abs(turned), 0.0)
 
     def finished(self, time, finished):
         """Aircraft (N,) bool that finished their plan (a route's last waypoint reached) in
@@ -360,7 +366,11 @@ class WorldMetrics:
         # non-finite positions fail every test of the pair scan: leave them off the grid
         ids = np.flatnonzero(self._active & np.isfinite(pos).all(axis=1))
         wcv = pred = np.zeros(0, dtype=np.int64)
-        if ids.size > 1:
+        if 1 < ids.size <= _ONE_CELL:
+            # few aircraft: every pair in one cell (the flags are exact tests, the grid
+            # only skips pairs that cannot be flagged), no grid to build
+            cx = cy = np.zeros(ids.size, dtype=np.int64)
+        elif ids.size > 1:
             speed = np.hypot(vel[ids, 0], vel[ids, 1])
             speed = speed[np.isfinite(speed)]
             reach = pair_reach(
@@ -373,10 +383,12 @@ class WorldMetrics:
             cx = np.floor(pos[ids, 0] / reach).astype(np.int64)
             cy = np.floor(pos[ids, 1] / reach).astype(np.int64)
             order = np.lexsort((cy, cx))
+            ids, cx, cy = ids[order], cx[order], cy[order]
+        if ids.size > 1:
             wcv, pred = _pair_scan(
-                ids[order],
-                cx[order],
-                cy[order],
+                ids,
+                cx,
+                cy,
                 pos,
                 vel,
                 np.ascontiguousarray(following, dtype=np.bool_),
@@ -395,8 +407,10 @@ class WorldMetrics:
         else:
             began = int(wcv.size)
         self._wcv_prev = wcv
-        self._wcv_ever.put(wcv, np.zeros(wcv.size, dtype=np.int64))
-        self._predicted.put(pred, np.zeros(pred.size, dtype=np.int64))
+        if wcv.size:  # (putting nothing changes nothing)
+            self._wcv_ever.put(wcv, np.zeros(wcv.size, dtype=np.int64))
+        if pred.size:
+            self._predicted.put(pred, np.zeros(pred.size, dtype=np.int64))
         self.wcv_events += began
         self.wcv_pair_steps += int(wcv.size)
 

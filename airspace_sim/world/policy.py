@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from airspace_sim.avoidance import resume_heading_change
 from airspace_sim.avoidance.bands import CLEAR_TOLERANCE
@@ -112,8 +113,9 @@ class AvoidancePolicy:
         follow = np.zeros(n, dtype=bool)
         resuming = np.zeros(n, dtype=bool)
         out = rate
-        if self.overrides:
-            flying = (self.avoid if avoid is None else avoid) & active
+        flying = (self.avoid if avoid is None else avoid) & active if self.overrides else None
+        anyone = flying is not None and bool(flying.any())
+        if anyone:
             follow = flying & self.conflict
             out = np.where(follow, self.advice / self.dt, rate)
             # resume toward the autopilot's heading only if that turn is clear
@@ -133,7 +135,10 @@ class AvoidancePolicy:
                     out[hold] = 0.0
                     follow[hold] = True
         self.following = follow
-        self.off_route_s = np.where(follow | resuming, self.off_route_s + self.dt, 0.0)
+        if anyone:
+            self.off_route_s = np.where(follow | resuming, self.off_route_s + self.dt, 0.0)
+        else:  # nobody follows or resumes
+            self.off_route_s = np.zeros(n)
         return out
 
     def _resume_clear(self, enc: Encounters, velocities, turn, max_heading_change):
@@ -242,35 +247,105 @@ class AvoidancePolicy:
         fallback: back to the right as soon as a strictly right heading is clear. Returns
         ``(psi (n,), side (n,))``.
         """
-        rows = np.arange(psi.size)
-        right, left, strict_right = first_clear[:, 0], first_clear[:, 1], first_clear[:, 2]
-        has_r, pick_r = right >= 0, cand[rows, np.maximum(right, 0)]
-        has_l, pick_l = left >= 0, cand[rows, np.maximum(left, 0)]
+        has_best = best_blocked is not None
+        if not has_best:
+            best_blocked = np.zeros((psi.size, 2), dtype=np.int64)
+        return _commit_kernel(
+            np.ascontiguousarray(psi, dtype=np.float64),
+            np.ascontiguousarray(conflict, dtype=np.bool_),
+            np.ascontiguousarray(side, dtype=np.float64),
+            np.ascontiguousarray(cand, dtype=np.float64),
+            np.ascontiguousarray(first_clear, dtype=np.int64),
+            np.ascontiguousarray(best_blocked, dtype=np.int64),
+            has_best,
+            self.preference == "right",
+        )
 
-        new_side = side.copy()
-        fresh = conflict & (side == 0)
-        if self.preference == "right":
-            psi = np.where(fresh & has_r, pick_r, np.where(fresh & ~has_r & has_l, pick_l, psi))
-            new_side = np.where(
-                fresh, np.where(has_r, -1.0, np.where(has_l, 1.0, np.sign(psi))), new_side
-            )
-            # one ownship turning left and one right can turn into each other
-            back = conflict & (side > 0) & (strict_right >= 0)
-            side = np.where(back, -1.0, side)
-            new_side = np.where(back, -1.0, new_side)
-        else:
-            new_side = np.where(fresh, np.sign(psi), new_side)
-        kept = conflict & (side != 0)
-        has_s = np.where(side < 0, has_r, has_l)
-        pick_s = np.where(side < 0, pick_r, pick_l)
-        psi = np.where(kept & has_s, pick_s, psi)
-        if best_blocked is not None:
-            # two ownships flipping sides at once can turn into each other: keep the side
-            best = np.where(side < 0, best_blocked[:, 0], best_blocked[:, 1])
-            psi = np.where(kept & ~has_s & (best >= 0), cand[rows, np.maximum(best, 0)], psi)
-        else:
-            new_side = np.where(kept & ~has_s, np.sign(psi), new_side)
-        return psi, np.where(conflict, new_side, side)
+
+@njit(cache=True)
+def _sign(x):
+    """np.sign of a float (+0.0 at ±0, NaN stays NaN)."""
+    if x > 0.0:
+        return 1.0
+    if x < 0.0:
+        return -1.0
+    return 0.0 if x == 0.0 else x
+
+
+@njit(cache=True)
+def _commit_kernel(psi, conflict, side, cand, first_clear, best_blocked, has_best, right):
+    """:meth:`AvoidancePolicy._commit` row by row (``right``: the ``"right"`` preference,
+    else ``"nearest"``; ``has_best``: ``best_blocked`` is given); the same selections as
+    :func:`commit_reference`, in one pass. Returns ``(psi (n,), side (n,))``."""
+    n = psi.size
+    out_psi = np.empty(n)
+    out_side = np.empty(n)
+    for r in range(n):
+        p, s, c = psi[r], side[r], conflict[r]
+        i_r, i_l, i_sr = first_clear[r, 0], first_clear[r, 1], first_clear[r, 2]
+        has_r, pick_r = i_r >= 0, cand[r, max(i_r, 0)]
+        has_l, pick_l = i_l >= 0, cand[r, max(i_l, 0)]
+        new_side = s
+        fresh = c and s == 0.0
+        if right:
+            if fresh and has_r:
+                p = pick_r
+            elif fresh and has_l:
+                p = pick_l
+            if fresh:
+                new_side = -1.0 if has_r else (1.0 if has_l else _sign(p))
+            if c and s > 0.0 and i_sr >= 0:  # back to the right
+                s = -1.0
+                new_side = -1.0
+        elif fresh:
+            new_side = _sign(p)
+        kept = c and s != 0.0
+        has_s = has_r if s < 0.0 else has_l
+        if kept and has_s:
+            p = pick_r if s < 0.0 else pick_l
+        if has_best:
+            best = best_blocked[r, 0] if s < 0.0 else best_blocked[r, 1]
+            if kept and not has_s and best >= 0:
+                p = cand[r, best]
+        elif kept and not has_s:
+            new_side = _sign(p)
+        out_psi[r] = p
+        out_side[r] = new_side if c else s
+    return out_psi, out_side
+
+
+def commit_reference(preference, psi, conflict, side, cand, first_clear, best_blocked=None):
+    """The numpy statement of :meth:`AvoidancePolicy._commit` (``preference`` "right" or
+    "nearest"), which :func:`_commit_kernel` computes row by row (tests compare them)."""
+    rows = np.arange(psi.size)
+    right, left, strict_right = first_clear[:, 0], first_clear[:, 1], first_clear[:, 2]
+    has_r, pick_r = right >= 0, cand[rows, np.maximum(right, 0)]
+    has_l, pick_l = left >= 0, cand[rows, np.maximum(left, 0)]
+
+    new_side = side.copy()
+    fresh = conflict & (side == 0)
+    if preference == "right":
+        psi = np.where(fresh & has_r, pick_r, np.where(fresh & ~has_r & has_l, pick_l, psi))
+        new_side = np.where(
+            fresh, np.where(has_r, -1.0, np.where(has_l, 1.0, np.sign(psi))), new_side
+        )
+        # one ownship turning left and one right can turn into each other
+        back = conflict & (side > 0) & (strict_right >= 0)
+        side = np.where(back, -1.0, side)
+        new_side = np.where(back, -1.0, new_side)
+    else:
+        new_side = np.where(fresh, np.sign(psi), new_side)
+    kept = conflict & (side != 0)
+    has_s = np.where(side < 0, has_r, has_l)
+    pick_s = np.where(side < 0, pick_r, pick_l)
+    psi = np.where(kept & has_s, pick_s, psi)
+    if best_blocked is not None:
+        # two ownships flipping sides at once can turn into each other: keep the side
+        best = np.where(side < 0, best_blocked[:, 0], best_blocked[:, 1])
+        psi = np.where(kept & ~has_s & (best >= 0), cand[rows, np.maximum(best, 0)], psi)
+    else:
+        new_side = np.where(kept & ~has_s, np.sign(psi), new_side)
+    return psi, np.where(conflict, new_side, side)
 
 
 def mode_predictions(

@@ -79,6 +79,16 @@ class Tracks:
                 self, name, _frozen(getattr(self, name), dtype, shape, f"tracks.{name}")
             )
 
+    @classmethod
+    def _of_view(cls, *arrays) -> Tracks:
+        """Tracks of a :class:`~.trackers.TrackView`'s arrays, in field order, read-only and
+        of the field dtypes (the caller checks), the view's shapes: not checked again (the
+        env reads them every step)."""
+        t = object.__new__(cls)
+        for name, a in zip(_TRACK_FIELDS, arrays):
+            object.__setattr__(t, name, a)
+        return t
+
     def __len__(self) -> int:
         return int(self.owner.size)
 
@@ -199,7 +209,17 @@ def live_tracks(world) -> Tracks:
     here too.
     """
     v = world.tracks.view()
-    return Tracks(v.owner, v.intruder, v.x, v.P, v.mu, v.misses, v.age)
+    arrays = (v.owner, v.intruder, v.x, v.P, v.mu, v.misses, v.age)
+    if [a.dtype for a in arrays] == _TRACK_DTYPES and not any(a.flags.writeable for a in arrays):
+        return Tracks._of_view(*arrays)
+    return Tracks(*arrays)
+
+
+#: dtypes of the :class:`Tracks` fields, in field order
+_TRACK_DTYPES = [np.dtype(d) for d in (np.int64, np.int64, float, float, float, np.int64, np.int64)]
+
+
+_TRACK_FIELDS = tuple(f.name for f in fields(Tracks))
 
 
 def _pairs(i, j) -> np.ndarray:

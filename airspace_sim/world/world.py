@@ -51,6 +51,8 @@ from airspace_sim.world.metrics import WorldMetrics
 from airspace_sim.world.policy import AvoidancePolicy
 from airspace_sim.world.trackers import TrackTable
 
+_EPS = np.finfo(float).eps  #: what np.sinc puts for a zero argument
+
 
 class World:
     """A running airspace scenario (see the module docstring for the step).
@@ -158,12 +160,19 @@ class World:
         )
         self.in_los = np.zeros(n, dtype=bool)
         self.nmac = np.zeros(n, dtype=bool)
+        self._last_pairs = None  # (owner, intruder, pair keys) of the last scan
         # the phases after motion, for the initial positions (no tracking errors recorded)
         self._update_contact_flags()
         scan = self._surveillance()
-        self.tracks.update(self.time, *scan, self.active, self._true_states())
+        self.tracks.update(self.time, *scan, self.active, self._truth_for_tracker())
         self._detection()
         self._record_metrics(tracking=False)
+
+    def __setstate__(self, state):
+        """Unpickle; a world pickled before the scan's pair keys were kept (an older
+        checkpoint) starts with none kept."""
+        state.setdefault("_last_pairs", None)
+        self.__dict__.update(state)
 
     # ------------------------------------------------------------ read-only
     @property
@@ -193,7 +202,7 @@ class World:
         rate = self._commands(heading_rate)
         self._motion(rate)
         scan = self._surveillance()
-        self.tracks.update(self.time, *scan, self.active, self._true_states())
+        self.tracks.update(self.time, *scan, self.active, self._truth_for_tracker())
         self._detection()
         self._record_metrics()
 
@@ -244,8 +253,13 @@ class World:
         dt = self.dt
         turn = rate * dt
         mid = self.headings + 0.5 * turn
-        chord = self.speeds * np.sinc(turn / (2.0 * np.pi))
-        v = chord[:, None] * np.stack([np.cos(mid), np.sin(mid)], axis=1)
+        # np.sinc(turn / 2π) as numpy computes it (π·x, eps at 0), without its overhead
+        y = np.pi * (turn / (2.0 * np.pi))
+        y[y == 0.0] = _EPS
+        chord = self.speeds * (np.sin(y) / y)
+        v = np.empty((self.n, 2))
+        np.multiply(chord, np.cos(mid), out=v[:, 0])
+        np.multiply(chord, np.sin(mid), out=v[:, 1])
         if self._kinematic:
             v, turn, rate = self._kinematic_motion(v, turn, rate)
         v[~self.active] = 0.0
@@ -263,8 +277,8 @@ class World:
         for members, ap in self.autopilots:
             finished[members] = ap.after_step(state)
         gone = finished & self.active
-        self.metrics_acc.finished(self.time, gone)
         if gone.any():
+            self.metrics_acc.finished(self.time, gone)
             self.active[gone] = False
             self.airspace.remove(np.flatnonzero(gone))
         if self._kinematic:
@@ -329,9 +343,26 @@ class World:
         intruder = np.concatenate([j, i])
         keep = self.trackers_on[owner] & self.active[owner] & self.active[intruder]
         owner, intruder = owner[keep], intruder[keep]
-        pk = streams.pair_keys(self.keys, owner, intruder)
+        pk = self._pair_keys(owner, intruder)
         z, det = self.sensor.measure(owner, intruder, self.positions, pk, self.step_count)
         return True, owner[det], intruder[det], z[det]
+
+    def _pair_keys(self, owner, intruder) -> np.ndarray:
+        """:func:`.streams.pair_keys` of these (D,) pairs; the last scan's are used again
+        when its pairs were the same (a pure function of the pairs; the pairs in range
+        change far less often than every scan)."""
+        last = self._last_pairs
+        if (
+            last is not None
+            and last[0].size == owner.size
+            and np.array_equal(last[0], owner)
+            and np.array_equal(last[1], intruder)
+        ):
+            return last[2]
+        pk = streams.pair_keys(self.keys, owner, intruder)
+        pk.flags.writeable = False
+        self._last_pairs = (owner, intruder, pk)
+        return pk
 
     def _record_metrics(self, tracking: bool = True) -> None:
         """Phase 6: contacts, conflicts and (``tracking``) track errors."""
@@ -361,9 +392,15 @@ class World:
 
     def _velocities(self) -> np.ndarray:
         """(N, 2) m/s from speeds and headings (0 for aircraft that left)."""
-        v = self.speeds[:, None] * np.stack([np.cos(self.headings), np.sin(self.headings)], axis=1)
+        v = np.empty((self.n, 2))
+        np.multiply(self.speeds, np.cos(self.headings), out=v[:, 0])
+        np.multiply(self.speeds, np.sin(self.headings), out=v[:, 1])
         v[~self.active] = 0.0
         return v
+
+    def _truth_for_tracker(self):
+        """:meth:`_true_states` for a tracker that ``uses_truth``, else None (not built)."""
+        return self._true_states() if self.tracks.tracker.uses_truth else None
 
     def _true_states(self) -> np.ndarray:
         """(N, 5) true ``[x, vx, y, vy, Ω]``."""
