@@ -6,7 +6,16 @@ import numpy as np
 import pytest
 
 from airspace_sim import registry
-from airspace_sim.avoidance.roundabout import candidate_time_to_loss, give_way, time_to_loss
+from airspace_sim.avoidance.cpa import cpa_min_ratio_numpy
+from airspace_sim.avoidance.mode_bands import mode_path_min_ratio
+from airspace_sim.avoidance.roundabout import (
+    candidate_time_to_loss,
+    co_rotated_boundaries,
+    co_rotated_min_ratio,
+    give_way,
+    time_to_loss,
+)
+from airspace_sim.geometry import wrap_angle
 from airspace_sim.scenarios import load
 from airspace_sim.world import World
 
@@ -126,3 +135,113 @@ def test_crossing_world_give_way_turns_stand_on_keeps_its_route():
     # the northbound stands on: its track stays on x = 0 (noise-free route autopilot)
     north = ids.index("northbound")
     assert abs(float(w.positions[north, 0])) < 1.0
+
+
+def test_co_rotation_head_on_turns_half_the_lone_angle():
+    # both turn right by ψ: relative velocity 2v(−cos ψ, −sin ψ), miss D·sin ψ: ψ = asin(ρ/D)
+    for turn in ("same", "mutual"):
+        psi, conflict = one([V, 0.0], [D, 0.0], [-V, 0.0], intruder_turn=turn)
+        assert conflict and psi == pytest.approx(-math.asin(RHO / D), abs=1e-6)
+
+
+def test_co_rotated_ratio_against_brute_force_time_sampling():
+    rng = np.random.default_rng(7)
+    n, k, c, horizon = 6, 3, 5, 120.0
+    r = rng.uniform(-15000, 15000, size=(n, k, 2))
+    v = rng.uniform(-460, 460, size=(n, k, 2))
+    valid = rng.random((n, k)) < 0.8
+    psi = rng.uniform(-1.5, 1.5, size=(n, c))
+    got = co_rotated_min_ratio(r, v, valid, psi, RHO, horizon, rows=4)
+    ts = np.linspace(0.0, horizon, 12001)
+    for i in range(n):
+        for j in range(c):
+            want = np.inf
+            for q in range(k):
+                if valid[i, q]:
+                    cs, sn = math.cos(psi[i, j]), math.sin(psi[i, j])
+                    vr = np.array(
+                        [cs * v[i, q, 0] - sn * v[i, q, 1], sn * v[i, q, 0] + cs * v[i, q, 1]]
+                    )
+                    d = np.hypot(r[i, q, 0] + ts * vr[0], r[i, q, 1] + ts * vr[1]).min()
+                    want = min(want, d / RHO)
+            assert got[i, j] == pytest.approx(want, rel=1e-4)
+    assert co_rotated_min_ratio(r, v, valid, np.full((n, 1), np.nan), RHO, horizon)[0, 0] == -np.inf
+
+
+def test_co_rotated_boundaries_are_where_the_fine_grid_band_changes():
+    rng = np.random.default_rng(11)
+    grid = np.linspace(-math.pi, math.pi, 72001)[None, :]  # 0.005° apart
+    checked = 0
+    for _ in range(40):
+        r = rng.uniform(-20000, 20000, size=(1, 1, 2))
+        v = rng.uniform(-460, 460, size=(1, 1, 2))
+        clear = co_rotated_min_ratio(r, v, np.ones((1, 1), bool), grid, RHO, 120.0)[0] >= 1
+        edges = grid[0, 1:][clear[1:] != clear[:-1]]
+        bounds = co_rotated_boundaries(r, v, np.ones((1, 1), bool), RHO, 120.0)[0]
+        bounds = bounds[np.isfinite(bounds)]
+        for e in edges:  # every edge of the clear set is one of the closed-form boundaries
+            gap = np.abs(wrap_angle(bounds - e)).min()
+            assert gap < 2e-4
+            checked += 1
+    assert checked > 20
+
+
+def test_mode_paths_of_a_straight_mode_are_the_cpa_test():
+    # a mode predicting straight flight puts xs = r + v·t: the polyline is the straight
+    # relative track, so the distance is the closed-form clamped CPA of "bands" over [0, T]
+    rng = np.random.default_rng(13)
+    n, k, c, T = 5, 4, 7, 45.0
+    own = rng.uniform(-250, 250, size=(n, 2))
+    r = rng.uniform(-15000, 15000, size=(n, k, 2))
+    v = rng.uniform(-460, 460, size=(n, k, 2))
+    valid = rng.random((n, k)) < 0.8
+    t = np.linspace(T / 10, T, 10)
+    xs = (r[:, :, None, :] + v[:, :, None, :] * t[:, None])[:, :, None]  # one mode
+    psi = rng.uniform(-1.2, 1.2, size=(n, c))
+    got = mode_path_min_ratio(own, r, xs, t, valid[:, :, None], psi, RHO, rows=2)
+    want = cpa_min_ratio_numpy(own, r, v, valid, psi, RHO, T)
+    assert np.allclose(got, want, rtol=1e-9)
+
+
+def test_mode_aware_sees_a_turning_intruder_the_straight_test_misses():
+    # an intruder 12 km ahead-right flying parallel, turning left into the ownship at 3°/s:
+    # straight, the current heading is clear; its turn mode's path crosses the ownship's
+    own = np.array([[V, 0.0]])
+    r = np.array([[[8000.0, -6000.0]]])
+    w = math.radians(3.0)
+    t = np.arange(1, 46, dtype=float)
+    # the intruder's coordinated turn from heading 0 at rate w, relative to a straight ownship
+    xi = r[0, 0, 0] + V * np.sin(w * t) / w - V * t
+    yi = r[0, 0, 1] + V * (1 - np.cos(w * t)) / w
+    xs = np.stack([xi, yi], axis=-1)[None, None, None]  # (1, 1, 1, S, 2)
+    ratio = mode_path_min_ratio(own, r, xs, t, np.ones((1, 1, 1), bool), np.zeros((1, 1)), RHO)
+    direct = np.hypot(xi, yi).min() / RHO
+    assert ratio[0, 0] < 1.0 and ratio[0, 0] == pytest.approx(direct, rel=0.02)
+    straight = cpa_min_ratio_numpy(
+        own, r, np.zeros((1, 1, 2)), np.ones((1, 1), bool), np.zeros((1, 1)), RHO, 45.0
+    )
+    assert straight[0, 0] > 1.0
+
+
+def test_without_convention_or_predictions_the_choice_is_bands():
+    rng = np.random.default_rng(17)
+    n, k = 40, 6
+    own = rng.uniform(-250, 250, size=(n, 2))
+    r = rng.uniform(-20000, 20000, size=(n, k, 2))
+    v = rng.uniform(-460, 460, size=(n, k, 2))
+    valid = rng.random((n, k)) < 0.7
+    mx = np.full(n, math.pi / 2)
+    params = {"r_safe": R_SAFE, "margin": MARGIN}
+    want = registry.build("resolver", "bands", params=params).resolve(own, r, v, valid, mx)
+    for name, extra in (("bands-modes", {}), ("bands-roundabout", {"parallel_angle": math.pi / 2})):
+        got = registry.build("resolver", name, params={**params, **extra}).resolve(
+            own, r, v, valid, mx
+        )
+        assert np.array_equal(got.heading_change, want.heading_change)
+        assert np.array_equal(got.conflict, want.conflict)
+
+
+def test_mode_aware_world_crossing_keeps_separation():
+    sc = load("crossing", ['resolver.kind="bands-modes"'])
+    m = World(sc, seed=0).run()
+    assert m["los_events"] == 0 and m["min_separation_m"] >= R_SAFE

@@ -22,6 +22,14 @@ give-way aircraft may be boxed in, or see the ownship late): a safety net, not t
 The band search itself is :func:`~airspace_sim.avoidance.bands.band_search` on the
 intruders the ownship resolves against (the ``"bands"`` kernels, unchanged).
 
+How the intruders move while the ownship turns by a candidate ψ (``intruder_turn``):
+``"straight"`` as tracked (``"bands"``' reading); ``"same"``: it turns by ψ too, the
+implicit coordination of a symmetric scene (everyone offset the same way, the centralised
+plan's roundabout): the relative velocity is the tracked one rotated by ψ
+(:func:`co_rotated_min_ratio`, band edges in closed form in
+:func:`co_rotated_boundaries`); ``"mutual"``: only where the intruder gives way too.
+Intruders inside ``standon_s`` are always judged straight.
+
 Recovery (``recover_by_time``): where a side has no clear heading, ``"bands"`` takes the
 candidate of the largest minimum CPA distance ratio; this one takes the candidate whose
 first loss of the clear radius comes latest (ties: the larger ratio), which leaves the
@@ -43,7 +51,7 @@ from airspace_sim.avoidance.bands import (
     first_clear_from_band,
     preferred_candidates,
 )
-from airspace_sim.avoidance.cpa import cpa_min_ratio
+from airspace_sim.avoidance.cpa import cpa_min_ratio, cpa_min_ratio_turning
 from airspace_sim.avoidance.resolvers import BandsResolver, ResolverOutput, _arrays
 from airspace_sim.geometry import rotate, wrap_angle
 from airspace_sim.parts import param
@@ -204,7 +212,8 @@ class RoundaboutBandsResolver(BandsResolver):
         urgent = valid & (time_to_loss(r, v, radius) <= p.standon_s)
         gives = give_way(vo, v, valid, p.parallel_angle)
         considered = gives | urgent
-        if p.intruder_turn == "straight":
+        modes = self._mode_ratio(vo, r, considered, mode_predictions)
+        if p.intruder_turn == "straight" and modes is None:
             res = self._search(vo, r, v, considered, mx, p.r_safe, turn_rate, committed_side)
             out = ResolverOutput(
                 res.heading_change,
@@ -216,22 +225,32 @@ class RoundaboutBandsResolver(BandsResolver):
                 best_blocked=res.best_blocked,
             )
         else:
-            co = considered & ~urgent
+            co = considered & ~urgent if p.intruder_turn != "straight" else np.zeros_like(valid)
             if p.intruder_turn == "mutual":
                 # the intruder gives way to this ownship too (a near-parallel pair)
                 co &= give_way(vo, v, valid, p.parallel_angle, intruder=True)
-            out = self._co_search(vo, r, v, considered & ~co, co, mx, committed_side)
+            out = self._co_search(
+                vo, r, v, considered & ~co, co, mx, committed_side, modes, turn_rate
+            )
         if p.recover_by_time and out.best_blocked is not None:
             out.best_blocked = self._latest_loss(
                 vo, r, v, considered, out.candidates, out.first_clear, out.best_blocked
             )
         return out
 
-    def _co_search(self, vo, r, v, straight, co, mx, committed_side):
+    def _mode_ratio(self, vo, r, considered, mode_predictions):
+        """None, or a function of the candidates (N, C) rad giving a (N, C) ratio every
+        candidate must also reach (a mode-aware resolver's judgement of the intruders'
+        predicted paths, ``"bands-modes"``); this resolver is not mode-aware."""
+        return None
+
+    def _co_search(self, vo, r, v, straight, co, mx, committed_side, modes=None, turn_rate=None):
         """The band search with the ``straight`` intruders as tracked and the ``co`` ones
-        turning by the candidate too (:func:`co_rotated_min_ratio`); the choice, the
-        preference order and the side outputs are those of
-        :func:`~airspace_sim.avoidance.bands.band_search` (``full=True``)."""
+        turning by the candidate too (:func:`co_rotated_min_ratio`), and with ``modes``
+        (:meth:`_mode_ratio`) that ratio as well; the choice, the preference order and the
+        side outputs are those of :func:`~airspace_sim.avoidance.bands.band_search`
+        (``full=True``). With ``model_turn`` the straight intruders are judged against the
+        candidate as flown at ``turn_rate`` (the others as if turned at once)."""
         p = self.params
         n = vo.shape[0]
         radius = p.r_safe * (1.0 + p.margin)
@@ -247,10 +266,18 @@ class RoundaboutBandsResolver(BandsResolver):
         cand = preferred_candidates(mx, p.resolution, extra, p.left_penalty)
         usable = ~np.isnan(cand)
         safe = np.where(usable, cand, 0.0)
+        if p.model_turn and turn_rate is not None:
+            ratio = cpa_min_ratio_turning(
+                vo, r, v, straight, safe, radius, p.lookahead_s, turn_rate
+            )
+        else:
+            ratio = cpa_min_ratio(vo, r, v, straight, safe, radius, p.lookahead_s)
         ratio = np.minimum(
-            cpa_min_ratio(vo, r, v, straight, safe, radius, p.lookahead_s),
+            ratio,
             co_rotated_min_ratio(r, v, co, safe, radius, p.lookahead_s),
         )
+        if modes is not None:
+            ratio = np.minimum(ratio, modes(safe))
         ratio = np.where(usable, ratio, -np.inf)
         both = straight | co
         ratio0 = cpa_min_ratio(vo, r, v, both, np.zeros((n, 1)), radius, p.lookahead_s)[:, 0]
