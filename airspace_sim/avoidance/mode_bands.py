@@ -31,7 +31,7 @@ from airspace_sim.geometry import rotate
 from airspace_sim.parts import param
 
 
-def mode_path_min_ratio(own_velocity, rel_position, xs, times_s, use, psi, radius, rows=32):
+def mode_path_min_ratio(own_velocity, rel_position, xs, times_s, use, psi, radius, chunk=2048):
     """(N, C) min over the used (intruder, mode) paths of the distance to the ownship turned
     by ``psi`` (N, C) rad at once, divided by ``radius`` (m); ``inf`` where none is used.
 
@@ -41,28 +41,36 @@ def mode_path_min_ratio(own_velocity, rel_position, xs, times_s, use, psi, radiu
     mode_predictions`); turning the ownship adds ``(v_o − R(ψ)·v_o)·t``. Between samples
     the relative track is taken straight (exact for the straight mode; a chord of the
     turning modes' arcs). ``use`` (N, K, M) bool; own_velocity (N, 2) m/s.
+
+    A path that no heading change can bring within ``radius`` (``|x_s| − 2|v_o|·t_s >
+    radius`` at every sample, ``|v_o − R(ψ)v_o| ≤ 2|v_o|``) is left out: it reports ``inf``
+    instead of its ratio, which is above 1 for every candidate (so every clear/blocked
+    verdict and every blocked candidate's ratio is the exact one). The rest are evaluated
+    ``chunk`` paths at a time (memory ~ chunk·C·S).
     """
     vo = np.asarray(own_velocity, dtype=float)
     psi = np.asarray(psi, dtype=float)
-    n, k, m = use.shape
-    t = np.concatenate([[0.0], np.asarray(times_s, dtype=float)])  # (S + 1,)
-    pts = np.concatenate(
-        [np.broadcast_to(rel_position[:, :, None, None, :], (n, k, m, 1, 2)), xs], axis=3
-    )  # (N, K, M, S + 1, 2)
+    xs = np.asarray(xs, dtype=float)
+    r = np.asarray(rel_position, dtype=float)
+    t = np.asarray(times_s, dtype=float)
     out = np.full(psi.shape, np.inf)
-    for a in range(0, n, rows):
-        sl = slice(a, a + rows)
-        dv = vo[sl, None, :] - rotate(vo[sl, None, :], np.nan_to_num(psi[sl]))  # (n, C, 2)
-        # (n, C, K, M, S + 1, 2): the path as flown against the turned ownship
-        q = pts[sl, None] + dv[:, :, None, None, None, :] * t[:, None]
+    reach = 2.0 * np.hypot(vo[:, 0], vo[:, 1])[:, None, None, None] * t  # (N, 1, 1, S)
+    near = (np.hypot(xs[..., 0], xs[..., 1]) - reach <= radius).any(axis=-1)
+    near |= (np.hypot(r[..., 0], r[..., 1]) <= radius)[..., None]
+    own, kk, mm = np.nonzero(np.asarray(use, dtype=bool) & near)
+    t0 = np.concatenate([[0.0], t])  # (S + 1,)
+    for a in range(0, own.size, chunk):
+        o, k, m = own[a : a + chunk], kk[a : a + chunk], mm[a : a + chunk]
+        pts = np.concatenate([r[o, k][:, None, :], xs[o, k, m]], axis=1)  # (P, S + 1, 2)
+        dv = vo[o, None, :] - rotate(vo[o, None, :], np.nan_to_num(psi[o]))  # (P, C, 2)
+        q = pts[:, None] + dv[:, :, None, :] * t0[:, None]  # (P, C, S + 1, 2)
         p0, seg = q[..., :-1, :], np.diff(q, axis=-2)
         L2 = np.einsum("...i,...i->...", seg, seg)
         with np.errstate(invalid="ignore", divide="ignore"):
             u = np.clip(-np.einsum("...i,...i->...", p0, seg) / L2, 0.0, 1.0)
         u = np.where(L2 > 0, u, 0.0)
         d = np.hypot(p0[..., 0] + u * seg[..., 0], p0[..., 1] + u * seg[..., 1]).min(axis=-1)
-        d = np.where(use[sl, None], d / radius, np.inf)  # (n, C, K, M)
-        out[sl] = d.reshape(d.shape[0], d.shape[1], -1).min(axis=-1, initial=np.inf)
+        np.minimum.at(out, o, d / radius)  # (P, C) into the owners' rows
     return out
 
 
