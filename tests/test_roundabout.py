@@ -248,3 +248,35 @@ def test_mode_aware_world_crossing_keeps_separation():
     sc = load("crossing", ['resolver.kind="bands-modes"'])
     m = World(sc, seed=0).run()
     assert m["los_events"] == 0 and m["min_separation_m"] >= R_SAFE
+
+
+def test_mode_path_blocking_the_lone_escape_moves_the_choice():
+    # a head-on intruder (bands: 2·asin(ρ/D) right) and a second track whose straight
+    # prediction is far away but whose likely mode puts it, fixed, on that escape heading
+    T = 45.0
+    t = np.maximum(1, np.rint(T * np.arange(1, 11) / 10))  # the policy's sample times
+    own = np.array([[V, 0.0]])
+    lone = -2 * math.asin(RHO / D)
+    p = 9000.0 * np.array([math.cos(lone), math.sin(lone)])  # on the lone escape track
+    r = np.array([[[D, 0.0], [p[0], p[1] - 30000.0]]])
+    v = np.array([[[-2 * V, 0.0], [-V, -V]]])  # second: straight, it is far off
+    xs = np.zeros((1, 2, 1, t.size, 2))
+    xs[0, 0, 0] = r[0, 0] + v[0, 0] * t[:, None]
+    xs[0, 1, 0] = p - own[0] * t[:, None]  # fixed at p, seen from a straight ownship
+    pred = (xs, np.zeros(xs.shape + (2,)), np.ones((1, 2, 1)))
+    args = (own, r, v, np.array([[True, True]]), np.array([math.pi / 2]))
+    params = {"r_safe": R_SAFE, "margin": MARGIN, "lookahead_s": T}
+    bands = registry.build("resolver", "bands", params=params).resolve(*args)
+    assert float(bands.heading_change[0]) == pytest.approx(lone, abs=1e-6)
+    modes = registry.build("resolver", "bands-modes", params=params)
+    psi = float(modes.resolve(*args, mode_predictions=pred).heading_change[0])
+    # the choice clears the fixed point: the turned track's distance to p over [0, T]
+    ts = np.linspace(0, T, 4501)
+    track = np.stack([V * math.cos(psi) * ts, V * math.sin(psi) * ts], axis=1)
+    assert np.hypot(*(track - p).T).min() >= RHO * (1 - 1e-6)
+    assert abs(psi - lone) > math.radians(1.0)
+    # judged only over the first 2 s (before any sample), it is bands again
+    near = registry.build("resolver", "bands-modes", params={**params, "mode_horizon_s": 2.0})
+    assert float(near.resolve(*args, mode_predictions=pred).heading_change[0]) == float(
+        bands.heading_change[0]
+    )

@@ -93,6 +93,13 @@ class ModeAwareBandsResolver(RoundaboutBandsResolver):
         mode_threshold: float = param(
             0.2, doc="mode probability from which a mode's path is judged", gt=0, le=1
         )
+        mode_horizon_s: float | None = param(
+            None,
+            unit="s",
+            doc="judge the mode paths only this far ahead (unset: the whole look-ahead)",
+            gt=0,
+            le=3600.0,
+        )
         #: the loader fills dt (the prediction times are whole steps)
         dt: float = param(1.0, unit="s", doc="world step (prediction times)", gt=0, le=60.0)
 
@@ -112,4 +119,10 @@ class ModeAwareBandsResolver(RoundaboutBandsResolver):
         use = considered[:, :, None] & (mu >= self.params.mode_threshold)
         radius = self.params.r_safe * (1.0 + self.params.margin)
         t = steps * self.params.dt
+        if self.params.mode_horizon_s is not None:
+            # a turn mode predicts the turn going on for ever; manoeuvres end: near term only
+            keep = t <= self.params.mode_horizon_s + 1e-9
+            xs, t = xs[..., keep, :], t[keep]
+            if t.size == 0:
+                return None
         return lambda psi: mode_path_min_ratio(vo, r, xs, t, use, psi, radius)
