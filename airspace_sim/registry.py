@@ -139,6 +139,8 @@ def _import_builtins() -> None:
     # Importing these modules runs their @register decorators.
     for mod in (
         "airspace_sim.avoidance.resolvers",
+        "airspace_sim.avoidance.roundabout",
+        "airspace_sim.avoidance.mode_bands",
         "airspace_sim.world.autopilots",
         "airspace_sim.recorded.autopilot",
         "airspace_sim.world.sensors",

@@ -7,6 +7,10 @@
 - :mod:`.resolvers`: the resolver classes registered as ``"none"``, ``"seed"``,
   ``"seed-world"``, ``"bands"``, ``"bands-probabilistic"`` (protocol
   :class:`airspace_sim.parts.Resolver`), and :func:`~.resolvers.build_resolver`.
+- :mod:`.roundabout`: ``"bands-roundabout"``, bands under a right-of-way convention, with
+  co-rotated candidates and recovery by latest loss as options (issue 13, docs/resolvers.md).
+- :mod:`.mode_bands`: ``"bands-modes"``, bands whose candidates also clear each likely IMM
+  mode's predicted path.
 
 Units: metres, seconds, radians; angles CCW positive (a negative heading change is a right
 turn); relative quantities are intruder minus ownship.

@@ -5,7 +5,7 @@
 
 Each case × kind prints one JSON line: LoS pairs, NMAC pairs, induced LoS pairs, extra
 path %, mean / max arrival delay, not arrived, wall time. ``kind:key=value`` sets
-``resolver.params`` (numbers only).
+``resolver.params`` (a TOML value: a number, true or false).
 """
 
 from __future__ import annotations
@@ -15,6 +15,7 @@ import dataclasses
 import json
 import sys
 import time
+import tomllib
 
 from airspace_sim.scenarios import load
 from airspace_sim.world import World
@@ -26,15 +27,16 @@ def seeds_of(text):
     return list(range(int(a), int(b) + 1)) if b else [int(a)]
 
 
-def scenario(case, kind):
+def scenario(case, kind, policy=()):
     name, params = kind.split(":")[0], {}
     for kv in kind.split(":")[1:]:
         k, v = kv.split("=")
-        params[k] = float(v)
+        params[k] = tomllib.loads(f"v = {v}")["v"]
+    knobs = {k: tomllib.loads(f"v = {v}")["v"] for k, _, v in (kv.partition("=") for kv in policy)}
     parts = case.split(":")
     sc = ring_scenario(int(parts[1])) if parts[0] == "ring" else load("dense_random")
     base = dict(sc.resolver.params)
-    spec = dataclasses.replace(sc.resolver, kind=name, params={**base, **params})
+    spec = dataclasses.replace(sc.resolver, kind=name, params={**base, **params}, **knobs)
     return dataclasses.replace(sc, resolver=spec), seeds_of(parts[-1])
 
 
@@ -42,6 +44,13 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("cases", nargs="+", help="ring:N:SEEDS or dense:SEEDS")
     ap.add_argument("--kinds", nargs="+", default=["bands", "bands-reciprocal"])
+    ap.add_argument(
+        "--policy",
+        nargs="*",
+        default=[],
+        metavar="KEY=VALUE",
+        help="CDA policy knobs of [resolver] for every run, e.g. resume_margin=0.5",
+    )
     args = ap.parse_args(argv)
     keys = (
         "los_pairs",
@@ -55,11 +64,12 @@ def main(argv=None):
     )
     for case in args.cases:
         for kind in args.kinds:
-            sc, seeds = scenario(case, kind)
+            sc, seeds = scenario(case, kind, args.policy)
             for seed in seeds:
                 t0 = time.perf_counter()
                 m = World(sc, seed=seed).run()
-                row = {"case": case, "kind": kind, "seed": seed, **{k: m[k] for k in keys}}
+                row = {"case": case, "kind": kind, "policy": " ".join(args.policy), "seed": seed}
+                row.update({k: m[k] for k in keys})
                 row["wall_s"] = round(time.perf_counter() - t0, 1)
                 print(json.dumps(row), flush=True)
     return 0
