@@ -1,5 +1,6 @@
 """The World: autopilots, turn limits, tracks, avoidance, determinism, isolation."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -181,6 +182,16 @@ def test_markov_modes_follow_the_chain_and_imm_recognises_them():
     m = world.metrics()
     assert m["mode_accuracy"] > 0.7  # well above always guessing "straight" (~0.6)
     assert m["track_rmse_m"] < 50.0  # below the raw measurement error (σ√2 ≈ 71 m)
+
+
+def test_mode_accuracy_only_for_a_tracker_whose_modes_are_the_traffics():
+    """imm-ct has three modes like the realistic traffic, but other ones (quiet CV, CT, manoeuvring
+    CV): comparing its mode indices with the traffic's would be meaningless, so no accuracy."""
+    sc = markov_traffic(n=4)
+    sc = dataclasses.replace(sc, duration=20.0, tracker=TrackerSpec(kind="imm", model="imm-ct"))
+    m = World(sc).run()
+    assert m["track_steps"] > 0
+    assert math.isnan(m["mode_accuracy"])
 
 
 # ---------------------------------------------------------------- track table

@@ -23,7 +23,8 @@ Definitions (units SI; ``d`` a true centre distance between two aircraft):
   following resolver advice, degrees.
 - tracking: ``track_rmse_m``: RMS of the position error of every track at every step;
   ``mode_accuracy``: fraction of (track, step) samples of Markov intruders whose most
-  probable IMM mode equals the intruder's true mode (NaN if there were none);
+  probable IMM mode equals the intruder's true mode (NaN if there were none, or if the
+  tracker's modes are not the traffic's, compared by name);
   ``track_steps``: number of (track, step) samples.
 
 Safety-assurance metrics (DAIDALUS / ACAS X study conventions; ``docs/safety.md``):

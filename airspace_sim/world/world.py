@@ -49,7 +49,7 @@ from airspace_sim.world.autopilots import AutopilotContext, FlightState
 from airspace_sim.world.bodies import LOS, NMAC, RANGE, Airspace
 from airspace_sim.world.metrics import WorldMetrics
 from airspace_sim.world.policy import AvoidancePolicy
-from airspace_sim.world.trackers import TrackTable
+from airspace_sim.world.trackers import TrackTable, mode_names
 
 _EPS = np.finfo(float).eps  #: what np.sinc puts for a zero argument
 
@@ -112,6 +112,9 @@ class World:
         # parts
         self.keys = streams.aircraft_keys(self.seed, n)
         self.pilot_preset = presets.get(sc.model, dt=dt)
+        # mode_accuracy compares the tracker's modes with these, by name (a tracker model with
+        # as many modes but other meanings, e.g. imm-ct, has no accuracy against them)
+        self._traffic_mode_names = mode_names(self.pilot_preset)
         ctx = AutopilotContext(
             dt=dt, preset=self.pilot_preset, keys=self.keys, start_positions=self.positions.copy()
         )
@@ -172,6 +175,8 @@ class World:
         """Unpickle; a world pickled before the scan's pair keys were kept (an older
         checkpoint) starts with none kept."""
         state.setdefault("_last_pairs", None)
+        if "_traffic_mode_names" not in state:
+            state["_traffic_mode_names"] = mode_names(state["pilot_preset"])
         self.__dict__.update(state)
 
     # ------------------------------------------------------------ read-only
@@ -383,7 +388,7 @@ class World:
             return
         est_mode = true_mode = None
         markov = self.modes[view.intruder] >= 0
-        if markov.any() and self.tracks.n_modes == self.pilot_preset.n_modes:
+        if markov.any() and self.tracks.mode_names == self._traffic_mode_names:
             mu = view.mu[markov]
             if np.isfinite(mu).all():
                 est_mode = np.argmax(mu, axis=1)
