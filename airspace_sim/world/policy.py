@@ -185,9 +185,10 @@ class AvoidancePolicy:
         :meth:`_resume_clear`) and ρ(ψ) the minimum CPA distance over the look-ahead divided by
         R1 (:func:`~airspace_sim.avoidance.cpa.cpa_min_ratio`, straight flight after the
         heading change ψ): "partial" passes ψ with ρ(ψ) ≥ 1 (the "hold" test on a smaller
-        turn); "no-worse" passes ψ with ρ(ψ)·R1 ≥ R0 (no conflict) and ρ(ψ) ≥ min(1, ρ(0)):
-        within R1 the turn comes no closer to the nearest intruder than holding would, so an
-        intruder already inside R1 and diverging no longer blocks the turn back for ever.
+        turn); "no-worse" passes ψ with ρ(ψ)·R1 ≥ R0 (no conflict) and, for every intruder k,
+        ρ_k(ψ) ≥ min(1, ρ_k(0)): the turn keeps every intruder that holding keeps outside R1
+        outside it and brings none inside R1 closer than holding would, so an intruder
+        already inside R1 and diverging no longer blocks the turn back for ever.
         """
         vo = velocities[enc.owners]
         mx = max_heading_change[enc.owners]
@@ -198,14 +199,27 @@ class AvoidancePolicy:
         base = 1.0 + self.margin
         wide = base + extra
         radius = (self.r_safe * wide)[:, None]
-        ratio = cpa_min_ratio(
-            vo, enc.rel_position, enc.rel_velocity, enc.valid, psi, radius, self.lookahead_s
-        )
-        ok = ratio >= 1.0 - CLEAR_TOLERANCE
         if self.resume_rule == "no-worse":
+            # each (ownship, intruder) pair as its own row of the CPA kernel: (n, K, C)
+            n, k = enc.valid.shape
+            pair = cpa_min_ratio(
+                np.repeat(vo, k, axis=0),
+                enc.rel_position.reshape(n * k, 1, 2),
+                enc.rel_velocity.reshape(n * k, 1, 2),
+                enc.valid.reshape(n * k, 1),
+                np.repeat(psi, k, axis=0),
+                np.repeat(radius, k, axis=0),
+                self.lookahead_s,
+            ).reshape(n, k, -1)
+            ratio = pair.min(axis=1, initial=np.inf)
             no_conflict = ratio * (wide / base)[:, None] >= 1.0 - CLEAR_TOLERANCE
-            held = np.minimum(ratio[:, -1:], 1.0 - CLEAR_TOLERANCE)
-            ok = no_conflict & (ratio >= held)
+            held = np.minimum(pair[:, :, -1:], 1.0 - CLEAR_TOLERANCE)
+            ok = no_conflict & (pair >= held).all(axis=1)
+        else:
+            ratio = cpa_min_ratio(
+                vo, enc.rel_position, enc.rel_velocity, enc.valid, psi, radius, self.lookahead_s
+            )
+            ok = ratio >= 1.0 - CLEAR_TOLERANCE
         ok[:, -1] = True  # holding is always possible
         return RESUME_FRACTIONS[np.argmax(ok, axis=1)]
 
