@@ -61,7 +61,7 @@ def test_a_passed_diverging_intruder_inside_the_resume_radius_blocks_only_hold()
     assert _policy("no-worse")._resume_fraction(enc, velocities, fly, mx).tolist() == [1.0]
 
 
-@pytest.mark.parametrize("rule", ["partial", "no-worse"])
+@pytest.mark.parametrize("rule", ["partial", "no-worse", "diverging"])
 def test_the_fraction_flown_is_the_largest_that_passes_by_brute_force(rule):
     rng = np.random.default_rng(5)
     n, k = 300, 3
@@ -87,17 +87,25 @@ def test_the_fraction_flown_is_the_largest_that_passes_by_brute_force(rule):
         ds = each.min(axis=1)
         capped = np.minimum(each, R1)
         near = [abs(ds / x - 1).min() < 1e-3 for x in (R0, R1)]
+        near.append(rule != "partial" and (abs(each / R1 - 1) < 1e-3).any())
         if rule == "no-worse":
             # exact ties (a diverging intruder's closest point is now, whatever the turn) are
-            # decided; near ties and distances near R1 are not (sampling error ~1e-6)
+            # decided; near ties are not (sampling error ~1e-6)
             rel = abs(capped[:-1] / capped[-1:] - 1)
-            near.append(bool(((rel > 0) & (rel < 1e-5)).any() or (abs(each / R1 - 1) < 1e-3).any()))
+            near.append(bool(((rel > 0) & (rel < 1e-5)).any()))
+        now = np.hypot(r[i][valid[i]][:, 0], r[i][valid[i]][:, 1])  # (valid,) m
+        if rule == "diverging":
+            # sampling includes t = 0: a diverging pair's sampled minimum is exactly now
+            gap = 1 - each / now
+            near.append(bool(((gap > 0) & (gap < 1e-5)).any()))
         if any(near):
             continue  # sampling cannot decide a tie at a threshold
         if rule == "partial":
             ok = ds >= R1
-        else:
+        elif rule == "no-worse":
             ok = (ds >= R0) & (capped >= capped[-1:]).all(axis=1)
+        else:
+            ok = (ds >= R0) & ((each >= R1) | (each >= now)).all(axis=1)
         ok[-1] = True
         assert got[i] == RESUME_FRACTIONS[np.argmax(ok)], i
         checked += 1

@@ -192,7 +192,7 @@ NON_NEGATIVE_INT = _range(0, integer=True)
 PROBABILITY = _check("a probability in [0, 1]", lambda v: 0.0 <= v <= 1.0)
 NON_EMPTY = _check("a non-empty string", lambda v: bool(v.strip()))
 TURN_PREFERENCES = ("right", "nearest", "none")
-RESUME_RULES = ("hold", "partial", "no-worse")
+RESUME_RULES = ("hold", "partial", "no-worse", "diverging")
 
 #: Extra checks per ``"Class.field"`` beyond the annotated type: every value rule of the
 #: scenario lives here or in :func:`check_scenario` (cross-field), nowhere else.

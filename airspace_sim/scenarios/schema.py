@@ -84,7 +84,8 @@ class ResolverSpec:
     #: (world CDA policy, docs/resolvers.md "Resume rules"): "hold" (the turn clears that
     #: radius, else the heading is held), "partial" (the largest of 1, 1/2, 1/4 of the turn
     #: that clears it), "no-worse" (the largest that clears r_safe·(1 + margin) and brings no
-    #: intruder closer within that radius than holding would)
+    #: intruder closer within that radius than holding would), "diverging" (the largest that
+    #: clears r_safe·(1 + margin) and keeps each intruder outside that radius or diverging)
     resume_rule: str = "hold"
     #: "bands-probabilistic": seconds over which each intruder mode's prediction is judged
     #: (unset: the look-ahead), at this many evenly spaced times

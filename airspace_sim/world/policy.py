@@ -41,6 +41,9 @@ TURN_TOLERANCE = 1e-9
 #: fractions of the autopilot's turn back tried by the "partial" and "no-worse" resume rules,
 #: largest first; the last, 0, is holding the heading
 RESUME_FRACTIONS = np.array([1.0, 0.5, 0.25, 0.0])
+#: relative: a pair whose closest point over the look-ahead is within this of its current
+#: distance is diverging (the "diverging" resume rule; absorbs rounding of the CPA kernel)
+DIVERGING_TOLERANCE = 1e-9
 
 
 class AvoidancePolicy:
@@ -181,14 +184,18 @@ class AvoidancePolicy:
         ``max_heading_change``, that enc's ownships fly under ``resume_rule`` (the largest
         of :data:`RESUME_FRACTIONS` that passes; 0 holds the heading).
 
-        With R0 = r_safe·(1 + margin) and R1 = r_safe·(1 + margin + extra) (``extra`` as in
-        :meth:`_resume_clear`) and ρ(ψ) the minimum CPA distance over the look-ahead divided by
+        With R0 = r_safe·(1 + margin), R1 = r_safe·(1 + margin + extra) (``extra`` as in
+        :meth:`_resume_clear`), ρ(ψ) the minimum CPA distance over the look-ahead divided by
         R1 (:func:`~airspace_sim.avoidance.cpa.cpa_min_ratio`, straight flight after the
-        heading change ψ): "partial" passes ψ with ρ(ψ) ≥ 1 (the "hold" test on a smaller
-        turn); "no-worse" passes ψ with ρ(ψ)·R1 ≥ R0 (no conflict) and, for every intruder k,
-        ρ_k(ψ) ≥ min(1, ρ_k(0)): the turn keeps every intruder that holding keeps outside R1
-        outside it and brings none inside R1 closer than holding would, so an intruder
-        already inside R1 and diverging no longer blocks the turn back for ever.
+        heading change ψ) and ρ_k(ψ) the same for intruder k alone:
+
+        - "partial" passes ψ with ρ(ψ) ≥ 1 (the "hold" test on a smaller turn);
+        - "no-worse" passes ψ with ρ(ψ)·R1 ≥ R0 (no conflict) and ρ_k(ψ) ≥ min(1, ρ_k(0))
+          for every k: the turn keeps outside R1 every intruder that holding keeps outside
+          it and brings none inside R1 closer than holding would, so an intruder already
+          inside R1 and diverging no longer blocks the turn back for ever;
+        - "diverging" is stricter: no conflict, and every intruder either outside R1 or
+          diverging after the turn (its closest point is now: ρ_k(ψ) = |r_k|/R1).
         """
         vo = velocities[enc.owners]
         mx = max_heading_change[enc.owners]
@@ -199,7 +206,7 @@ class AvoidancePolicy:
         base = 1.0 + self.margin
         wide = base + extra
         radius = (self.r_safe * wide)[:, None]
-        if self.resume_rule == "no-worse":
+        if self.resume_rule in ("no-worse", "diverging"):
             # each (ownship, intruder) pair as its own row of the CPA kernel: (n, K, C)
             n, k = enc.valid.shape
             pair = cpa_min_ratio(
@@ -213,8 +220,13 @@ class AvoidancePolicy:
             ).reshape(n, k, -1)
             ratio = pair.min(axis=1, initial=np.inf)
             no_conflict = ratio * (wide / base)[:, None] >= 1.0 - CLEAR_TOLERANCE
-            held = np.minimum(pair[:, :, -1:], 1.0 - CLEAR_TOLERANCE)
-            ok = no_conflict & (pair >= held).all(axis=1)
+            if self.resume_rule == "no-worse":
+                floor = np.minimum(pair[:, :, -1:], 1.0 - CLEAR_TOLERANCE)
+            else:  # clear of R1, or closest now: the pair's current distance over R1
+                now = np.hypot(enc.rel_position[..., 0], enc.rel_position[..., 1])
+                now = now[:, :, None] / radius[:, :, None] * (1.0 - DIVERGING_TOLERANCE)
+                floor = np.minimum(now, 1.0 - CLEAR_TOLERANCE)
+            ok = no_conflict & (pair >= floor).all(axis=1)
         else:
             ratio = cpa_min_ratio(
                 vo, enc.rel_position, enc.rel_velocity, enc.valid, psi, radius, self.lookahead_s
