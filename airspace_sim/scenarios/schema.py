@@ -80,6 +80,13 @@ class ResolverSpec:
     #: never); random traffic needs it, or aircraft wait for a clearance that never opens
     #: (docs/tuning.md)
     resume_decay_s: float | None = None
+    #: how a clear ownship's turn back is judged against r_safe·(1 + margin + resume_margin)
+    #: (world CDA policy, docs/resolvers.md "Resume rules"): "hold" (the turn clears that
+    #: radius, else the heading is held), "partial" (the largest of 1, 1/2, 1/4 of the turn
+    #: that clears it), "no-worse" (the largest that clears r_safe·(1 + margin) and brings no
+    #: intruder closer within that radius than holding would), "diverging" (the largest that
+    #: clears r_safe·(1 + margin) and keeps each intruder outside that radius or diverging)
+    resume_rule: str = "hold"
     #: "bands-probabilistic": seconds over which each intruder mode's prediction is judged
     #: (unset: the look-ahead), at this many evenly spaced times
     probability_horizon_s: float | None = None

@@ -15,7 +15,7 @@ reaches into it:
   the turn side is committed.
 
 Policy knobs live in ``scenario.resolver`` (``search_deg``, ``turn_preference``,
-``confirm_s``, ``resume_margin``, ``resume_decay_s``, ``side_memory_s``,
+``confirm_s``, ``resume_margin``, ``resume_decay_s``, ``resume_rule``, ``side_memory_s``,
 ``probability_horizon_s``, ``probability_samples``); why they have the values they have is
 in ``docs/tuning.md``.
 """
@@ -29,6 +29,7 @@ from numba import njit
 
 from airspace_sim.avoidance import resume_heading_change
 from airspace_sim.avoidance.bands import CLEAR_TOLERANCE
+from airspace_sim.avoidance.cpa import cpa_min_ratio
 from airspace_sim.avoidance.resolvers import build_resolver
 from airspace_sim.tracking.prediction import relative_positions
 from airspace_sim.world.control import Encounters, gather, screen
@@ -36,6 +37,13 @@ from airspace_sim.world.control import Encounters, gather, screen
 #: rad: an autopilot turn smaller than this per step is "on course" (a route autopilot's
 #: atan2 gives ~1e-16 rad/s on a straight leg, which must not count as turning back)
 TURN_TOLERANCE = 1e-9
+
+#: fractions of the autopilot's turn back tried by the "partial" and "no-worse" resume rules,
+#: largest first; the last, 0, is holding the heading
+RESUME_FRACTIONS = np.array([1.0, 0.5, 0.25, 0.0])
+#: relative: a pair whose closest point over the look-ahead is within this of its current
+#: distance is diverging (the "diverging" resume rule; absorbs rounding of the CPA kernel)
+DIVERGING_TOLERANCE = 1e-9
 
 
 class AvoidancePolicy:
@@ -75,6 +83,7 @@ class AvoidancePolicy:
         self.search_range = math.radians(float(spec.search_deg))
         self.resume_margin = float(spec.resume_margin)
         self.resume_decay_s = None if spec.resume_decay_s is None else float(spec.resume_decay_s)
+        self.resume_rule = spec.resume_rule
         self.confirm_steps = math.ceil(float(spec.confirm_s) / dt - 1e-9)
         self.preference = spec.turn_preference
         self.memory_steps = max(math.ceil(float(spec.side_memory_s) / dt - 1e-9), 1)
@@ -130,10 +139,17 @@ class AvoidancePolicy:
                 sub = enc.subset(resuming[enc.owners])
                 if sub.owners.size:
                     turn = rate[sub.owners] * self.dt
-                    clear = self._resume_clear(sub, velocities, turn, max_heading_change)
-                    hold = sub.owners[~clear]
-                    out[hold] = 0.0
-                    follow[hold] = True
+                    if self.resume_rule == "hold":
+                        clear = self._resume_clear(sub, velocities, turn, max_heading_change)
+                        hold = sub.owners[~clear]
+                        out[hold] = 0.0
+                        follow[hold] = True
+                    else:
+                        frac = self._resume_fraction(sub, velocities, turn, max_heading_change)
+                        part = frac < 1.0
+                        cut = sub.owners[part]
+                        out[cut] = np.where(frac[part] > 0.0, rate[cut] * frac[part], 0.0)
+                        follow[cut] = True
         self.following = follow
         if anyone:
             self.off_route_s = np.where(follow | resuming, self.off_route_s + self.dt, 0.0)
@@ -162,6 +178,62 @@ class AvoidancePolicy:
             margin=self.margin + extra,
         )
         return np.asarray(clear, dtype=bool)
+
+    def _resume_fraction(self, enc: Encounters, velocities, turn, max_heading_change):
+        """(n_own,) fraction of the turn back ``turn`` (n_own,) rad, clipped to
+        ``max_heading_change``, that enc's ownships fly under ``resume_rule`` (the largest
+        of :data:`RESUME_FRACTIONS` that passes; 0 holds the heading).
+
+        With R0 = r_safe·(1 + margin), R1 = r_safe·(1 + margin + extra) (``extra`` as in
+        :meth:`_resume_clear`), ρ(ψ) the minimum CPA distance over the look-ahead divided by
+        R1 (:func:`~airspace_sim.avoidance.cpa.cpa_min_ratio`, straight flight after the
+        heading change ψ) and ρ_k(ψ) the same for intruder k alone:
+
+        - "partial" passes ψ with ρ(ψ) ≥ 1 (the "hold" test on a smaller turn);
+        - "no-worse" passes ψ with ρ(ψ)·R1 ≥ R0 (no conflict) and ρ_k(ψ) ≥ min(1, ρ_k(0))
+          for every k: the turn keeps outside R1 every intruder that holding keeps outside
+          it and brings none inside R1 closer than holding would, so an intruder already
+          inside R1 and diverging no longer blocks the turn back for ever;
+        - "diverging" is stricter: no conflict, and every intruder either outside R1 or
+          diverging after the turn (its closest point is now: ρ_k(ψ) = |r_k|/R1).
+        """
+        vo = velocities[enc.owners]
+        mx = max_heading_change[enc.owners]
+        psi = np.clip(turn, -mx, mx)[:, None] * RESUME_FRACTIONS[None, :]
+        extra = np.full(enc.owners.size, self.resume_margin)
+        if self.resume_decay_s is not None:
+            extra *= np.clip(1.0 - self.off_route_s[enc.owners] / self.resume_decay_s, 0.0, 1.0)
+        base = 1.0 + self.margin
+        wide = base + extra
+        radius = (self.r_safe * wide)[:, None]
+        if self.resume_rule in ("no-worse", "diverging"):
+            # each (ownship, intruder) pair as its own row of the CPA kernel: (n, K, C)
+            n, k = enc.valid.shape
+            pair = cpa_min_ratio(
+                np.repeat(vo, k, axis=0),
+                enc.rel_position.reshape(n * k, 1, 2),
+                enc.rel_velocity.reshape(n * k, 1, 2),
+                enc.valid.reshape(n * k, 1),
+                np.repeat(psi, k, axis=0),
+                np.repeat(radius, k, axis=0),
+                self.lookahead_s,
+            ).reshape(n, k, -1)
+            ratio = pair.min(axis=1, initial=np.inf)
+            no_conflict = ratio * (wide / base)[:, None] >= 1.0 - CLEAR_TOLERANCE
+            if self.resume_rule == "no-worse":
+                floor = np.minimum(pair[:, :, -1:], 1.0 - CLEAR_TOLERANCE)
+            else:  # clear of R1, or closest now: the pair's current distance over R1
+                now = np.hypot(enc.rel_position[..., 0], enc.rel_position[..., 1])
+                now = now[:, :, None] / radius[:, :, None] * (1.0 - DIVERGING_TOLERANCE)
+                floor = np.minimum(now, 1.0 - CLEAR_TOLERANCE)
+            ok = no_conflict & (pair >= floor).all(axis=1)
+        else:
+            ratio = cpa_min_ratio(
+                vo, enc.rel_position, enc.rel_velocity, enc.valid, psi, radius, self.lookahead_s
+            )
+            ok = ratio >= 1.0 - CLEAR_TOLERANCE
+        ok[:, -1] = True  # holding is always possible
+        return RESUME_FRACTIONS[np.argmax(ok, axis=1)]
 
     # ------------------------------------------------------------ detection
     def advise(self, tracks, positions, velocities, active, max_heading_change):
