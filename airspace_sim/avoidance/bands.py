@@ -90,6 +90,35 @@ def first_clear_from_band(candidates, band):
     return out
 
 
+def bands_from_ratio(candidates, ratio, usable, wanted):
+    """``(band (N, C), first_clear (N, 3), best_blocked (N, 2))`` of :class:`BandResult`
+    from every candidate's ``ratio`` (N, C) (``-inf`` where not ``usable``); ``wanted``
+    (N, 2) bool: the sides whose best blocked candidate is asked for."""
+    band = usable & (ratio >= 1.0 - CLEAR_TOLERANCE)
+    first = first_clear_from_band(candidates, band)
+    best = np.full((ratio.shape[0], 2), -1, dtype=np.int64)
+    for col, mask in enumerate((candidates <= 0, candidates >= 0)):
+        score = np.where(mask & usable, ratio, -np.inf)
+        blocked = (first[:, col] < 0) & (mask & usable).any(axis=1) & wanted[:, col]
+        best[:, col] = np.where(blocked, np.argmax(score, axis=1), -1)
+    return band, first, best
+
+
+def band_choice(first_clear, best_blocked, score):
+    """(N,) index of the chosen candidate: the first clear one of either side, else the
+    better of the two sides' best blocked (the earlier one among equals); ``score(idx)``
+    gives (N,) ratios of the candidates at (N,) indices (−1: none, scored −inf)."""
+    right, left = first_clear[:, RIGHT_OR_AHEAD], first_clear[:, LEFT_OR_AHEAD]
+    first_any = np.where(right < 0, left, np.where(left < 0, right, np.minimum(right, left)))
+    br, bl = best_blocked[:, 0], best_blocked[:, 1]
+    none_clear = (right < 0) & (left < 0)
+    fallback = np.zeros(first_clear.shape[0], dtype=np.int64)
+    if none_clear.any():
+        sr, sl = score(br), score(bl)
+        fallback = np.where((sr > sl) | ((sr == sl) & (br >= 0) & ((bl < 0) | (br < bl))), br, bl)
+    return np.where(none_clear, np.maximum(fallback, 0), first_any)
+
+
 def _grid(max_heading_change, resolution):
     """The grid ``k·resolution`` (G,) rad, ``|k| ≤ floor(max(max_heading_change)/resolution)``."""
     mx = np.asarray(max_heading_change, dtype=float)
@@ -400,13 +429,7 @@ def band_search(
         else:
             ratio = cpa_min_ratio_turning(vo, r, v, valid, safe, radius, lookahead_s, turn_rate)
         ratio = np.where(usable, ratio, -np.inf)
-        band = usable & (ratio >= 1.0 - CLEAR_TOLERANCE)
-        first = first_clear_from_band(cand, band)
-        best = np.full((n, 2), -1, dtype=np.int64)
-        for col, mask in enumerate((cand <= 0, cand >= 0)):
-            score = np.where(mask & usable, ratio, -np.inf)
-            blocked = (first[:, col] < 0) & (mask & usable).any(axis=1) & wanted[:, col]
-            best[:, col] = np.where(blocked, np.argmax(score, axis=1), -1)
+        band, first, best = bands_from_ratio(cand, ratio, usable, wanted)
     else:
         band = ratio = None
         args = (
@@ -431,10 +454,6 @@ def band_search(
         who, col = np.nonzero(blocked)
         if who.size:
             best[who, col] = best_blocked_search(*args, who.astype(np.int64), col.astype(np.int64))
-    right, left = first[:, RIGHT_OR_AHEAD], first[:, LEFT_OR_AHEAD]
-    first_any = np.where(right < 0, left, np.where(left < 0, right, np.minimum(right, left)))
-    # nothing clear: the better of the two sides' best (the earlier one among equals)
-    br, bl = best[:, 0], best[:, 1]
     if ratio is None:
         score = lambda idx: np.where(  # noqa: E731
             idx >= 0,
@@ -445,12 +464,7 @@ def band_search(
         )
     else:
         score = lambda idx: np.where(idx >= 0, ratio[rows, np.maximum(idx, 0)], -np.inf)  # noqa: E731
-    none_clear = (right < 0) & (left < 0)
-    fallback = np.zeros(n, dtype=np.int64)
-    if none_clear.any():
-        sr, sl = score(br), score(bl)
-        fallback = np.where((sr > sl) | ((sr == sl) & (br >= 0) & ((bl < 0) | (br < bl))), br, bl)
-    choice = np.where(none_clear, np.maximum(fallback, 0), first_any)
+    choice = band_choice(first, best, score)
     heading_change = cand[rows, choice]
     return BandResult(heading_change, conflict, cand, band, ratio, first, best)
 

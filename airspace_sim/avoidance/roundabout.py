@@ -47,8 +47,9 @@ import numpy as np
 from airspace_sim import registry
 from airspace_sim.avoidance.bands import (
     CLEAR_TOLERANCE,
+    band_choice,
+    bands_from_ratio,
     exact_boundary_candidates,
-    first_clear_from_band,
     preferred_candidates,
 )
 from airspace_sim.avoidance.cpa import cpa_min_ratio, cpa_min_ratio_turning
@@ -213,16 +214,9 @@ class RoundaboutBandsResolver(BandsResolver):
         gives = give_way(vo, v, valid, p.parallel_angle)
         considered = gives | urgent
         modes = self._mode_ratio(vo, r, considered, mode_predictions)
-        if p.intruder_turn == "straight" and modes is None:
-            res = self._search(vo, r, v, considered, mx, p.r_safe, turn_rate, committed_side)
-            out = ResolverOutput(
-                res.heading_change,
-                res.conflict,
-                res.candidates,
-                res.band,
-                min_ratio=res.min_ratio,
-                first_clear=res.first_clear,
-                best_blocked=res.best_blocked,
+        if p.intruder_turn == "straight" and modes is None:  # bands on the considered ones
+            out = super().resolve(
+                vo, r, v, considered, mx, turn_rate=turn_rate, committed_side=committed_side
             )
         else:
             co = considered & ~urgent if p.intruder_turn != "straight" else np.zeros_like(valid)
@@ -282,25 +276,15 @@ class RoundaboutBandsResolver(BandsResolver):
         both = straight | co
         ratio0 = cpa_min_ratio(vo, r, v, both, np.zeros((n, 1)), radius, p.lookahead_s)[:, 0]
         conflict = ~(ratio0 >= 1.0 - CLEAR_TOLERANCE)
-        band = usable & (ratio >= 1.0 - CLEAR_TOLERANCE)
-        first = first_clear_from_band(cand, band)
         wanted = np.ones((n, 2), dtype=bool)
         if committed_side is not None:
             side = np.broadcast_to(np.asarray(committed_side, dtype=float), (n,))
             wanted = np.stack([side <= 0, side >= 0], axis=1)
-        best = np.full((n, 2), -1, dtype=np.int64)
-        for col, mask in enumerate((cand <= 0, cand >= 0)):
-            score = np.where(mask & usable, ratio, -np.inf)
-            blocked = (first[:, col] < 0) & (mask & usable).any(axis=1) & wanted[:, col]
-            best[:, col] = np.where(blocked, np.argmax(score, axis=1), -1)
+        band, first, best = bands_from_ratio(cand, ratio, usable, wanted)
         rows = np.arange(n)
-        right, left = first[:, 0], first[:, 1]
-        first_any = np.where(right < 0, left, np.where(left < 0, right, np.minimum(right, left)))
-        br, bl = best[:, 0], best[:, 1]
-        sr = np.where(br >= 0, ratio[rows, np.maximum(br, 0)], -np.inf)
-        sl = np.where(bl >= 0, ratio[rows, np.maximum(bl, 0)], -np.inf)
-        fallback = np.where((sr > sl) | ((sr == sl) & (br >= 0) & ((bl < 0) | (br < bl))), br, bl)
-        choice = np.where((right < 0) & (left < 0), np.maximum(fallback, 0), first_any)
+        choice = band_choice(
+            first, best, lambda idx: np.where(idx >= 0, ratio[rows, np.maximum(idx, 0)], -np.inf)
+        )
         psi = np.where(conflict, cand[rows, choice], 0.0)
         return ResolverOutput(
             psi, conflict, cand, band, min_ratio=ratio, first_clear=first, best_blocked=best
