@@ -119,22 +119,7 @@ def test_pair_scan_over_many_grid_cells_matches_brute_force():
     following = rng.random(n) < 0.2
     active = rng.random(n) < 0.9
     assert pair_reach(np.hypot(*vel.T).max(), DMOD_M, TAU_MOD_S, r_safe, look) < 2500
-    m = WorldMetrics(n, r_safe, 152.4, 1.0)
-    none = {t: np.zeros(0, np.int64) for t in (LOS, NMAC, RANGE)}
-    began = {t: np.zeros((0, 2), np.int64) for t in (LOS, NMAC, RANGE)}
-    m.contacts(pos, none, began)
-    m.conflicts(np.zeros(n, bool))
-    m.safety(0.0, pos, vel, active, following, look)
-    wcv, pred = set(), set()
-    for i in range(n):
-        for j in range(i + 1, n):
-            if not (active[i] and active[j]):
-                continue
-            s, v = pos[j] - pos[i], vel[j] - vel[i]
-            if _wcv_scalar(s, v):
-                wcv.add(i * n + j)
-            if not following[i] and not following[j] and _predicted_scalar(s, v, r_safe, look):
-                pred.add(i * n + j)
+    m, wcv, pred = safety_and_brute_force(pos, vel, active, following, r_safe, look)
     assert len(wcv) > 20 and len(pred) > 5
     assert (
         m.wcv_events
@@ -416,3 +401,27 @@ def test_risk_ratio_undefined_without_unequipped_nmac():
     ]
     out = risk_ratio(scene(craft, resolver="bands", duration=30.0), [0])
     assert out["nmac_unequipped"] == 0 and math.isnan(out["risk_ratio"])
+
+
+def safety_and_brute_force(pos, vel, active, following, r_safe, look):
+    """One :meth:`WorldMetrics.safety` call on (N, 2) positions and velocities, and the
+    pair keys i·N + j of the well-clear violations and predicted conflicts by the scalar
+    definitions over all pairs: ``(metrics, wcv set, predicted set)``."""
+    n = pos.shape[0]
+    m = WorldMetrics(n, r_safe, 152.4, 1.0)
+    none = {t: np.zeros(0, np.int64) for t in (LOS, NMAC, RANGE)}
+    began = {t: np.zeros((0, 2), np.int64) for t in (LOS, NMAC, RANGE)}
+    m.contacts(pos, none, began)
+    m.conflicts(np.zeros(n, bool))
+    m.safety(0.0, pos, vel, active, following, look)
+    wcv, pred = set(), set()
+    for i in range(n):
+        for j in range(i + 1, n):
+            if not (active[i] and active[j]):
+                continue
+            s, v = pos[j] - pos[i], vel[j] - vel[i]
+            if _wcv_scalar(s, v):
+                wcv.add(i * n + j)
+            if not following[i] and not following[j] and _predicted_scalar(s, v, r_safe, look):
+                pred.add(i * n + j)
+    return m, wcv, pred
