@@ -13,3 +13,13 @@ def _checkpoint_key(tmp_path_factory):
     mp.setenv(KEY_ENV, str(tmp_path_factory.mktemp("key") / "checkpoint.key"))
     yield
     mp.undo()
+
+
+@pytest.fixture(scope="module")
+def local_ray():
+    """A local Ray with 2 CPUs for one test module (the Ray backend and RLlib tests),
+    shut down after it."""
+    ray = pytest.importorskip("ray")
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
+    yield
+    ray.shutdown()

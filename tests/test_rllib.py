@@ -96,15 +96,6 @@ def test_wrapper_spaces_and_mixed_ending():
             assert sa.is_terminated
 
 
-@pytest.fixture(scope="module")
-def local_ray():
-    import ray
-
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
-    yield
-    ray.shutdown()
-
-
 def test_ppo_shared_policy_checkpoint_and_actor(tmp_path, local_ray):
     """Two PPO iterations on ring4 (short episodes, tiny batches): every agent's steps go
     to the one ``shared`` module, the update is finite, and the checkpoint's module acts

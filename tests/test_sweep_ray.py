@@ -17,13 +17,6 @@ from airspace_sim.experiments.sweep import run_sweep  # noqa: E402
 GRID = ["resolver.kind=bands,none"]
 
 
-@pytest.fixture(scope="module")
-def local_ray():
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
-    yield
-    ray.shutdown()
-
-
 def test_sweep_on_ray_equals_local(tmp_path, local_ray):
     kw = dict(steps=30, progress=False)
     local = run_sweep("head_on", GRID, "0-2", tmp_path / "l.parquet", **kw)
