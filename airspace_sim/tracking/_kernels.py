@@ -3,7 +3,7 @@
 :func:`imm_step_kernel` returns the step kernel (``M`` modes, ``n`` states, ``m``
 measurement components). The mode-conditioned state lives in *slots* of a chunked
 structure-of-arrays layout, ``(C, ..., W)``: ``C`` chunks of ``W`` lanes, slot ``s`` in
-chunk ``s // W``, lane ``s % W`` (:class:`airspace_sim.tracking.imm.SlotIMM` owns it).
+chunk ``s // W``, lane ``s % W`` (:class:`airspace_sim.tracking.slot_imm.SlotIMM` owns it).
 Each step of the IMM cycle is a set of loops whose innermost loop runs over the ``W``
 lanes of a chunk — LLVM turns it into SIMD code, one tracker per lane — with the model
 sizes as (run-time) outer loop bounds and ``W`` a compile-time constant. Work buffers are
