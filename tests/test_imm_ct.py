@@ -288,3 +288,61 @@ def test_a_preset_s_tracker_model_is_separate_from_its_traffic():
         np.testing.assert_array_equal(getattr(t.imm, name), getattr(ref.imm, name))
     x0 = np.array([[0.0, 150.0, 0.0, 60.0, 0.0]])
     assert IMM.from_preset(both, x0, np.eye(5) * 100.0).mode_names == fm.mode_names()
+
+
+def four_mode_preset(dt):
+    """Quiet CV, steady CT, roll-in/roll-out CT (a larger σ_Ω of its own), manoeuvring CV."""
+    from dataclasses import replace
+
+    from airspace_sim.dynamics import markov
+    from airspace_sim.dynamics.presets import _tup
+
+    base = presets.get("imm-ct", dt=dt)
+    sojourn = (120.0, 60.0, 15.0, 10.0)
+    switch = [[0, 0.7, 0.2, 0.1], [0.5, 0, 0.4, 0.1], [0.3, 0.6, 0, 0.1], [0.4, 0.3, 0.3, 0]]
+    return replace(
+        base, turn_rates=(0.0, 0.03, 0.03, 0.0), estimated_turn_rate=(False, True, True, False),
+        transition_matrix=_tup(markov.transition_matrix_from_sojourn(sojourn, dt, switch)),
+        sojourn_s=sojourn, switch_probabilities=_tup(switch),
+        filter_mode_sigma_accel=(0.3, 1.5, 1.5, 5.0),
+        filter_mode_sigma_turn_rate=tuple(math.radians(v) for v in (0.0, 0.3, 1.5, 0.0)),
+    )  # fmt: skip
+
+
+def test_two_estimated_rate_modes_with_their_own_sigma_omega_equal_filterpy_imm():
+    """Four modes, two of them EKF turns that differ only by σ_Ω, against filterpy's
+    IMMEstimator over two KalmanFilters and two EKFs whose Q_ΩΩ is written here
+    (σ_Ω,j² T): the per-mode σ_Ω reaches the kernel, and each EKF mode keeps its own."""
+    rng = np.random.default_rng(7)
+    T, sigma = 4.0, 100.0
+    p = four_mode_preset(T).with_(measurement_sigma=sigma)
+    a = p.imm_arguments()
+    assert a["estimated_turn_rate"].tolist() == [False, True, True, False]
+    for j, deg in ((1, 0.3), (2, 1.5)):
+        assert a["process_noise"][j, 4, 4] == pytest.approx(math.radians(deg) ** 2 * T, rel=1e-12)
+    assert p.mode_names() == ("straight 0.3 m/s²", "turn 1.5 m/s² 0.3°/s/√s",
+                              "turn 1.5 m/s² 1.5°/s/√s", "straight 5 m/s²")  # fmt: skip
+    x0 = np.array([0.0, 150.0, 0.0, 60.0, 0.005])
+    P0 = np.diag([100.0**2, 30.0**2, 100.0**2, 30.0**2, 0.01**2])
+    mu0 = p.mu0()
+    imm = IMM(**a, x0=x0[None], P0=P0, mu0=mu0, gate_probability=1.0)
+    H, R = a["measurement_matrix"], a["measurement_noise"]
+    ekfs = [CTEKF(T, a["process_noise"][j], H, R, x0, P0) for j in (1, 2)]
+    filters = [linear_kf(a, 0, x0, P0), *ekfs, linear_kf(a, 3, x0, P0)]
+    ref = IMMEstimator(filters, mu0.copy(), a["transition_matrix"].copy())
+    imm_equals_filterpy(imm, ref, turning_measurements(rng, 80, T, sigma))
+    # the roll-in mode's rate moves further than the steady one's after the rate change
+    assert not np.allclose(imm.x_modes[0, 1, 4], imm.x_modes[0, 2, 4])
+
+
+def test_per_mode_sigma_omega_is_checked_and_defaults_to_the_shared_one():
+    from airspace_sim.errors import UserError
+
+    p = presets.get("imm-ct", dt=2.0)
+    same = p.with_(filter_mode_sigma_turn_rate=(0.0, p.ct_sigma_turn_rate, 0.0))
+    np.testing.assert_array_equal(same.imm_arguments()["process_noise"],
+                                  p.imm_arguments()["process_noise"])  # fmt: skip
+    assert same.mode_names() == p.mode_names()  # no duplicate to tell apart
+    for bad in ((0.1, 0.2), (0.0, -0.1, 0.0), (0.0, float("nan"), 0.0)):
+        with pytest.raises(UserError, match="filter_mode_sigma_turn_rate must be 3 non-negative"):
+            p.with_(filter_mode_sigma_turn_rate=bad)

@@ -122,3 +122,152 @@ def test_evaluate_tracker_command_on_a_recorded_file(tmp_path, capsys):
 
     rows = json.loads(out.read_text())
     assert [r["period_s"] for r in rows] == [1.0, 4.0] and all(r["n_flights"] == 1 for r in rows)
+
+
+def filterpy_known_motion(truths, sigma, T, sa, accel, seed):
+    """Position RMSE of filterpy KalmanFilters, one per flight, stepped with the turn
+    written here in closed form at the truth's rate and ``accel(flight, k)`` (2,) m/s² as
+    the control input; the measurements and counted seconds as the evaluation draws them."""
+    from filterpy.kalman import KalmanFilter
+
+    X = evaluation._stack(truths)
+    Z = evaluation.measurements(X, sigma, seed)
+    ev = evaluation._evaluated(X, T)
+    R = sigma**2 * np.eye(2)
+    x0, P0 = evaluation.two_point_initialisation(Z[0], Z[1], T, R, 0.0, math.radians(3) ** 2)
+    q = sa**2 * np.array([[T**4 / 4, T**3 / 2], [T**3 / 2, T**2]])
+    err = []
+    for f in range(X.shape[1]):
+        kf = KalmanFilter(dim_x=4, dim_z=2, dim_u=2)
+        kf.x, kf.P, kf.R = x0[f, :4, None].copy(), P0[f, :4, :4].copy(), R
+        kf.H = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]])
+        kf.Q = np.zeros((4, 4))
+        kf.Q[np.ix_([0, 1], [0, 1])] = kf.Q[np.ix_([2, 3], [2, 3])] = q
+        kf.B = np.array([[T**2 / 2, 0], [T, 0], [0, T**2 / 2], [0, T]])
+        for k in range(2, X.shape[0]):
+            if not np.isfinite(X[k, f, 0]):
+                break
+            w = X[k - 1, f, 4]
+            s, c = (np.sin(w * T) / w, (1 - np.cos(w * T)) / w) if w else (T, 0.0)
+            co, si = np.cos(w * T), np.sin(w * T)
+            kf.F = np.array([[1, s, 0, -c], [0, co, 0, -si], [0, c, 1, s], [0, si, 0, co]])
+            kf.predict(u=accel(f, k - 1)[:, None])
+            kf.update(Z[k, f][:, None])
+            if ev[k, f]:
+                err.append(kf.x[[0, 2], 0] - X[k, f, [0, 2]])
+    return float(np.sqrt(np.mean(np.sum(np.square(err), axis=1))))
+
+
+def test_known_motion_filter_equals_filterpy():
+    """The floor's filter (told the truth's turn rate) against filterpy, and with the
+    along-track acceleration as input on flights whose speed changes linearly (so the
+    closed-form input is the derivative the floor takes of the truth's speed)."""
+    pytest.importorskip("filterpy")
+    t, X = flight(LEGS)
+    truths = [
+        evaluation.Truth("f", t, X),
+        evaluation.Truth("g", t[:900], X[:900] * [1, 1, -1, -1, -1]),
+    ]
+    got = evaluation.known_motion_rmse(truths, 50.0, 1.0, 0.7, seed=2)
+    want = filterpy_known_motion(truths, 50.0, 1.0, 0.7, lambda f, k: np.zeros(2), seed=2)
+    assert got == pytest.approx(want, rel=1e-9)
+    cv = evaluation.known_motion_rmse(truths, 50.0, 1.0, 2.0, seed=2, turn_rate=False)
+    ev = evaluation.evaluate(truths, presets.get("realistic"), 50.0, 1.0, seed=2, cv_sigmas=(2.0,))
+    assert cv == pytest.approx(ev.pos_cv, rel=1e-9)  # the same CV filter as the IMM kernel's
+    # straight, speeding up at 0.4 m/s²: x = v0 t + a t²/2
+    a, v0 = 0.4, 80.0
+    ts = np.arange(0.0, 400.0)
+    sp = v0 + a * ts
+    hd = math.radians(30.0)
+    Xa = np.stack([(v0 * ts + a * ts**2 / 2) * math.cos(hd), sp * math.cos(hd),
+                   (v0 * ts + a * ts**2 / 2) * math.sin(hd), sp * math.sin(hd), 0 * ts], 1)  # fmt: skip
+    acc = lambda f, k: a * np.array([math.cos(hd), math.sin(hd)])  # noqa: E731
+    tr = [evaluation.Truth("a", ts, Xa)]
+    got = evaluation.known_motion_rmse(tr, 50.0, 1.0, 0.1, along_track=True, seed=1)
+    assert got == pytest.approx(filterpy_known_motion(tr, 50.0, 1.0, 0.1, acc, seed=1), rel=1e-9)
+    # and told the input, it beats the same filter without it on that flight
+    assert got < evaluation.known_motion_rmse(tr, 50.0, 1.0, 0.1, seed=1)
+
+
+def test_regime_sigma_uses_the_quiet_value_on_straight_seconds_only():
+    t, X = flight(LEGS)
+    tr = [evaluation.Truth("f", t, X)]
+    same = evaluation.known_motion_rmse(tr, 50.0, 1.0, (0.5, 0.5), seed=4)
+    assert same == evaluation.known_motion_rmse(tr, 50.0, 1.0, 0.5, seed=4)
+    assert evaluation.known_motion_rmse(tr, 50.0, 1.0, (0.5, 3.0), seed=4) != same
+
+
+def test_since_onset_counts_seconds_from_the_start_of_each_same_sign_turn():
+    w = np.radians([[0.0], [0.2], [0.6], [1.0], [2.0], [-0.7], [-1.0], [0.0], [0.5], [np.nan]])
+    got = evaluation.since_onset(w, 2.0)[:, 0]
+    want = [np.nan, np.nan, 0, 2, 4, 0, 2, np.nan, 0, np.nan]
+    np.testing.assert_array_equal(got, want)
+
+
+def test_onset_bins_add_up_to_the_turning_flags():
+    t, X = flight(LEGS)
+    truths = [evaluation.Truth("f", t, X), evaluation.Truth("g", t, X * [1, 1, -1, -1, -1])]
+    ev = evaluation.evaluate(truths, presets.get("imm-ct"), 50.0, 1.0, seed=3, cv_sigmas=(2.0,))
+    shares = [b[2] for b in ev.onset]
+    assert sum(shares) == pytest.approx(1.0)
+    assert sum(s * f for _, _, s, f in ev.onset if s) == pytest.approx(ev.turning_flagged)
+    # turns of 60-90 s: the first 15 s are flagged less than the rest (detection delay)
+    assert ev.onset[0][3] < ev.onset[1][3]
+    assert "since the turn began" in ev.lines()[-1]
+    assert ev.to_dict()["onset"][-1]["to_s"] is None
+
+
+def test_tuning_and_floor_scripts_run_on_flights_made_here(tmp_path, monkeypatch, capsys):
+    """docs/benchmarks/tune_tracker.py (with a 4-mode candidate) and tracker_floor.py on
+    four traffic-style JSON files written here: the split, the candidate with another
+    number of modes, and the floors (told more, never worse than the CV filter)."""
+    pytest.importorskip("airspace_sim.recorded")
+    pd = pytest.importorskip("pandas")
+    pyproj = pytest.importorskip("pyproj")
+    import json
+    import sys
+    from pathlib import Path
+
+    to_geo = pyproj.Transformer.from_crs(
+        pyproj.CRS.from_proj4("+proj=aeqd +lat_0=47 +lon_0=8 +datum=WGS84 +units=m"),
+        "EPSG:4326", always_xy=True,
+    )  # fmt: skip
+    for i, sign in enumerate((1, -1, 1, -1)):
+        t, X = flight([(d, sign * r) for d, r in LEGS], speed=100.0 + 10 * i)
+        rec = np.arange(0, t.size, 5)
+        lon, lat = to_geo.transform(X[rec, 0] + 5e3 * i, X[rec, 2])
+        pd.DataFrame({
+            "timestamp": 1515748470000 + 1000 * t[rec].astype(np.int64), "icao24": f"abc12{i}",
+            "latitude": lat, "longitude": lon, "groundspeed": np.hypot(X[rec, 1], X[rec, 3]) / 0.514444,
+            "track": (90.0 - np.degrees(np.arctan2(X[rec, 3], X[rec, 1]))) % 360.0,
+            "callsign": "CALIBRA", "altitude": 3000,
+        }).to_json(tmp_path / f"f{i}.json.gz", orient="records")  # fmt: skip
+    bench = Path(__file__).resolve().parents[1] / "docs" / "benchmarks"
+    monkeypatch.syspath_prepend(str(bench))
+    for name in ("tune_tracker", "tracker_floor"):
+        sys.modules.pop(name, None)
+    import tracker_floor
+    import tune_tracker
+
+    assert [p.name for p in tune_tracker.split(tmp_path, "test")] == ["f1.json.gz", "f3.json.gz"]
+    four = {
+        "turn_rates": [0, 2, 2, 0], "estimated_turn_rate": [0, 1, 1, 0],
+        "filter_mode_sigma_accel": [0.3, 1.5, 1.5, 5], "filter_mode_sigma_turn_rate": [0.3, 0.3, 1.5, 0.3],
+        "sojourn_s": [120, 60, 15, 10],
+        "switch_probabilities": [[0, .7, .2, .1], [.5, 0, .4, .1], [.3, .6, 0, .1], [.4, .3, .3, 0]],
+    }  # fmt: skip
+    tune_tracker.main([str(tmp_path), "--period", "4", "--candidate", "{}",
+                       "--candidate", json.dumps(four)])  # fmt: skip
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert len(lines) == 2 and all(ln.startswith("train 4s imm-ct") for ln in lines)
+    ratios = [float(ln.split("ratio ")[1].split()[0]) for ln in lines]
+    assert all(0.3 < r < 1.0 for r in ratios)  # turns the CV filter does not follow
+    with pytest.raises(SystemExit, match="needs sojourn_s"):
+        tune_tracker.candidate(presets.get("imm-ct"), {"turn_rates": [0, 2, 2, 0]})
+    tracker_floor.main([str(tmp_path), "--split", "test", "--period", "4", "--preset", "imm-ct"])
+    out = capsys.readouterr().out
+    got = {ln.split(":")[0].removeprefix("test 4s "): float(ln.split("ratio ")[1].split()[0])
+           for ln in out.splitlines() if "ratio" in ln}  # fmt: skip
+    assert got["CV"] == 1.0 and got["rate"] < 1.0
+    assert got["rate + regime"] <= got["rate"] and got["rate + along-track"] < 1.0
+    assert "preset imm-ct" in got

@@ -57,6 +57,10 @@ class Preset:
     filter_mode_sigma_accel : optional (M,) white-noise-acceleration σ_a (m/s²) of each
         filter mode (e.g. a quiet and a manoeuvring constant-velocity mode); replaces
         ``filter_process_noise`` in :meth:`imm_arguments`, rebuilt for every ``dt``.
+    filter_mode_sigma_turn_rate : optional (M,) σ_Ω (rad/s per √s) of each estimated-rate
+        mode's Ω random walk, replacing ``ct_sigma_turn_rate`` for that mode (e.g. a
+        steady turn and a roll-in/roll-out turn whose rate changes fast); entries of
+        known-rate modes are not used.
     tracker : optional preset, the model the tracker assumes (:meth:`filter_model`) when it
         is not the traffic's: the traffic flies this preset's modes, and the world's and
         the recorded-flight trackers run ``tracker``'s (its own modes, Π, Q), at this
@@ -85,6 +89,7 @@ class Preset:
     estimated_turn_rate: tuple = None
     ct_sigma_turn_rate: float = 0.0
     filter_mode_sigma_accel: tuple = None
+    filter_mode_sigma_turn_rate: tuple = None
     tracker: Preset = None
 
     def __post_init__(self):
@@ -142,6 +147,14 @@ class Preset:
                     f"got {sa.tolist()}"
                 )
             set_("filter_mode_sigma_accel", tuple(sa.tolist()))
+        if self.filter_mode_sigma_turn_rate is not None:
+            so = np.asarray(self.filter_mode_sigma_turn_rate, dtype=float).reshape(-1)
+            if so.shape != (M,) or not np.all(np.isfinite(so) & (so >= 0)):
+                raise UserError(
+                    f"{where}: filter_mode_sigma_turn_rate must be {M} non-negative rad/s per "
+                    f"√s, got {so.tolist()}"
+                )
+            set_("filter_mode_sigma_turn_rate", tuple(so.tolist()))
         if self.tracker is not None and not isinstance(self.tracker, Preset):
             raise UserError(f"{where}: tracker must be a Preset, got {self.tracker!r}")
 
@@ -171,6 +184,12 @@ class Preset:
         if len(set(names)) < len(names) and self.filter_mode_sigma_accel is not None:
             # modes alike but for their noise (a quiet and a manoeuvring CV mode)
             names = [f"{v} {sa:g} m/s²" for v, sa in zip(names, self.filter_mode_sigma_accel)]
+        if len(set(names)) < len(names) and self.filter_mode_sigma_turn_rate is not None:
+            # estimated-rate modes alike but for their σ_Ω (a steady and a roll-in turn)
+            names = [
+                f"{v} {math.degrees(so):.3g}°/s/√s" if est else v
+                for v, so, est in zip(names, self.filter_mode_sigma_turn_rate, self.estimated())
+            ]
         return tuple(names)
 
     def transitions(self) -> np.ndarray:
@@ -230,7 +249,10 @@ class Preset:
                     for sa in self.filter_mode_sigma_accel
                 ]
             )
-        Q[est, 4, 4] = self.ct_sigma_turn_rate**2 * self.dt
+        sigma_omega = np.full(self.n_modes, self.ct_sigma_turn_rate)
+        if self.filter_mode_sigma_turn_rate is not None:
+            sigma_omega = np.asarray(self.filter_mode_sigma_turn_rate)
+        Q[est, 4, 4] = sigma_omega[est] ** 2 * self.dt
         # the estimated-rate flags and dt only when there are such modes, so the arguments
         # of a linear model stay those of any linear-Gaussian IMM (filterpy's included)
         extra = dict(estimated_turn_rate=est, dt=self.dt) if est.any() else {}

@@ -26,6 +26,14 @@ flag is right when its side is the truth's. A second flag, for any tracker with 
 combined estimate ``|Ω̂| ≥`` :data:`RATE_FLAG_DEG_S`. Turn rates are counter-clockwise
 positive.
 
+How good any causal filter can be on these truths (:func:`known_motion_rmse`): Kalman
+filters told, at every step, what the IMM has to infer — the truth's own turn rate, the
+regime (straight or not), its along-track acceleration — give the position RMSE a tracker
+with that knowledge reaches; their ratios to the best-tuned CV filter are the floors of the
+IMM / CV ratio (``docs/tracking.md``, ``docs/benchmarks/tracker_floor.py``). The turn
+flags are also broken down by the time since the turn began (:attr:`Evaluation.onset`):
+how much of the shortfall is detection delay.
+
 Flights are given as arrays (times in seconds, east/north positions in metres in a local
 frame), so any reader can feed this module; the ``evaluate-tracker`` command reads files.
 """
@@ -56,6 +64,10 @@ MAX_GAP_S = 30.0
 SMOOTH_S = 31.0
 #: Seconds of each track left out of the statistics while the filters settle.
 BURN_IN_S = 60.0
+#: A turn begins when |ω| reaches this (deg/s) with a sign it keeps (:func:`since_onset`).
+ONSET_DEG_S = 0.5
+#: Edges (s) of the time-since-onset bins of :attr:`Evaluation.onset`.
+ONSET_BINS_S = (0.0, 15.0, 30.0, math.inf)
 
 
 @dataclass(frozen=True)
@@ -173,11 +185,18 @@ class Evaluation:
     straight_rate_flagged: float
     gated: int
     cv_grid: dict = field(default_factory=dict)
+    #: per :data:`ONSET_BINS_S` bin [lo, hi) of seconds since the turn began: (lo, hi,
+    #: share of the turning seconds, share of those flagged with the right sign)
+    onset: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
         """The figures as JSON-ready Python values."""
         d = asdict(self)
         d["cv_grid"] = {str(k): v for k, v in self.cv_grid.items()}
+        d["onset"] = [
+            {"from_s": lo, "to_s": None if math.isinf(hi) else hi, "share": share, "flagged": fl}
+            for lo, hi, share, fl in self.onset
+        ]
         return d
 
     def lines(self) -> list[str]:
@@ -200,6 +219,11 @@ class Evaluation:
             f" straight seconds flagged {100 * self.straight_flagged:.2f}%",
             f"  by the rate estimate (|Omega| >= {RATE_FLAG_DEG_S:g} deg/s, right sign): turning "
             f"{100 * self.turning_rate_flagged:.1f}%, straight {100 * self.straight_rate_flagged:.2f}%",
+            "  turning seconds by time since the turn began: "
+            + "; ".join(
+                f"{lo:g}-{hi:g} s {100 * share:.0f}% of them, flagged {100 * fl:.0f}%"
+                for lo, hi, share, fl in self.onset
+            ),
         ]
 
 
@@ -214,6 +238,113 @@ def _stack(truths):
 
 def _rmse(err) -> float:
     return float(np.sqrt(np.mean(np.sum(err**2, axis=-1)))) if err.size else float("nan")
+
+
+def measurements(X, sigma_m: float, seed: int):
+    """Position measurements (T, F, 2) m of stacked truths ``X`` (T, F, 5) (:func:`_stack`):
+    ``(x, y) + N(0, σ² I)`` from ``numpy.random.default_rng(seed)``, NaN after each flight."""
+    T, F, _ = X.shape
+    rng = np.random.default_rng(seed)
+    return X[..., [0, 2]] + sigma_m * rng.standard_normal((T, F, 2))
+
+
+def _evaluated(X, period_s: float):
+    """(T, F) bool: the seconds the statistics count (live, after the burn-in)."""
+    ev = np.isfinite(X[..., 0])
+    ev[: 2 + int(math.ceil(BURN_IN_S / period_s))] = False
+    return ev
+
+
+def since_onset(omega, period_s: float):
+    """Seconds since the current turn began, (T, F), from turn rates ``omega`` (T, F) rad/s
+    every ``period_s``: a turn is a run of samples with |ω| ≥ :data:`ONSET_DEG_S` of one
+    sign; NaN outside turns."""
+    w = np.asarray(omega, dtype=float)
+    s = np.where(np.abs(w) >= math.radians(ONSET_DEG_S), np.sign(w), 0.0)  # NaN -> 0
+    T = s.shape[0]
+    k = np.arange(T)[:, None]
+    new = (s != 0) & np.vstack([np.ones((1,) + s.shape[1:], bool), s[1:] != s[:-1]])
+    start = np.maximum.accumulate(np.where(new, k, -1), axis=0)
+    return np.where(s != 0, (k - start) * period_s, np.nan)
+
+
+def known_motion_rmse(
+    truths,
+    sigma_m: float,
+    period_s: float,
+    sigma_accel,
+    along_track: bool = False,
+    seed: int = 0,
+    turn_rate: bool = True,
+) -> float:
+    """Position RMSE (m) of a Kalman filter told the truth's own motion, on the measurements
+    :func:`evaluate` draws (same ``seed``, same seconds counted).
+
+    State ``[x, vx, y, vy]``; each step is the coordinated turn at the truth's turn rate of
+    the step's start (Bar-Shalom, Li & Kirubarajan 2001, §11.7.1, the rate known), with
+    white-noise acceleration ``sigma_accel`` m/s²: a number, or a pair (σ on straight
+    seconds, |ω| < :data:`STRAIGHT_DEG_S`; σ elsewhere) — the filter is then told the regime
+    too. With ``along_track`` the truth's along-track acceleration (the derivative of its
+    speed) is a known input as well; with ``turn_rate=False`` the rate is not told (ω = 0:
+    the constant-velocity Kalman filter of :func:`evaluate`'s grid). Such a filter has what an IMM over these modes has to
+    infer: its RMSE, over the best-tuned CV filter's, is a floor for the IMM / CV ratio of
+    any tracker that models the turn but not the speed changes (``docs/tracking.md``).
+    """
+    if not truths:
+        raise UserError("evaluate-tracker: no flight segment long enough to evaluate")
+    X = _stack(truths)
+    Z = measurements(X, sigma_m, seed)
+    T, F, _ = X.shape
+    R = models.measurement_noise(sigma_m)
+    x0, P0 = two_point_initialisation(Z[0], Z[1], period_s, R, 0.0, math.radians(3.0) ** 2)
+    x, P = np.nan_to_num(x0[:, :4]), P0[:, :4, :4].copy()
+    w = np.nan_to_num(X[..., 4]) if turn_rate else np.zeros((T, F))
+    if np.ndim(sigma_accel) == 0:
+        sa = np.full((T, F), float(sigma_accel))
+    else:
+        quiet, other = (float(v) for v in sigma_accel)
+        sa = np.where(np.abs(np.degrees(np.nan_to_num(X[..., 4]))) < STRAIGHT_DEG_S, quiet, other)
+    Q1 = models.white_noise_acceleration(1.0, period_s)[:4, :4]
+    a = np.zeros((T, F, 2))
+    if along_track:
+        v = np.nan_to_num(X[..., [1, 3]])
+        speed = np.hypot(v[..., 0], v[..., 1])
+        a = (np.gradient(speed, period_s, axis=0) / np.maximum(speed, 1.0))[..., None] * v
+    H = models.position_measurement_matrix()[:, :4]
+    est = np.full((T, F, 4), np.nan)
+    for k in range(2, T):
+        Fk = _turn_transition(w[k - 1], period_s)
+        xp = np.einsum("fij,fj->fi", Fk, x)
+        xp[:, [0, 2]] += 0.5 * period_s**2 * a[k - 1]
+        xp[:, [1, 3]] += period_s * a[k - 1]
+        Pp = Fk @ P @ np.swapaxes(Fk, 1, 2) + sa[k - 1][:, None, None] ** 2 * Q1
+        ok = np.all(np.isfinite(Z[k]), axis=1)
+        S = H @ Pp @ H.T + R
+        K = Pp @ H.T @ np.linalg.inv(S)
+        xu = xp + np.einsum("fij,fj->fi", K, np.nan_to_num(Z[k]) - xp @ H.T)
+        IKH = np.eye(4) - K @ H
+        Pu = IKH @ Pp @ np.swapaxes(IKH, 1, 2) + K @ R @ np.swapaxes(K, 1, 2)  # Joseph form
+        x = np.where(ok[:, None], xu, xp)
+        P = np.where(ok[:, None, None], Pu, Pp)
+        est[k] = x
+    ev = _evaluated(X, period_s)
+    return _rmse((est - X[..., :4])[ev][:, [0, 2]])
+
+
+def _turn_transition(omega, T: float):
+    """(F, 4, 4) coordinated-turn transitions of ``[x, vx, y, vy]`` at rates ``omega`` (F,)
+    rad/s over ``T`` s (the constant-velocity one at ω = 0)."""
+    u = omega * T
+    small = np.abs(u) < 1e-9
+    safe = np.where(small, 1.0, omega)
+    s = np.where(small, T, np.sin(u) / safe)
+    c = np.where(small, 0.5 * omega * T * T, (1.0 - np.cos(u)) / safe)
+    co, si = np.cos(u), np.sin(u)
+    F = np.zeros(omega.shape + (4, 4))
+    F[:, 0, 0] = F[:, 2, 2] = 1.0
+    F[:, 0, 1], F[:, 0, 3], F[:, 2, 1], F[:, 2, 3] = s, -c, c, s
+    F[:, 1, 1], F[:, 1, 3], F[:, 3, 1], F[:, 3, 3] = co, -si, si, co
+    return F
 
 
 def turn_probabilities(imm, known, turning_modes, rate):
@@ -261,15 +392,11 @@ def evaluate(
     p = preset.with_(dt=period_s, measurement_sigma=sigma_m).filter_model()
     X = _stack(truths)
     T, F, _ = X.shape
-    rng = np.random.default_rng(seed)
-    Z = X[..., [0, 2]] + sigma_m * rng.standard_normal((T, F, 2))  # NaN after each flight
+    Z = measurements(X, sigma_m, seed)  # NaN after each flight
     R = models.measurement_noise(sigma_m)
     x0, P0 = two_point_initialisation(Z[0], Z[1], period_s, R, 0.0, math.radians(3.0) ** 2)
     mu0 = p.mu0()
-    burn = int(math.ceil(BURN_IN_S / period_s))
-    live = np.isfinite(X[..., 0])
-    ev = live.copy()
-    ev[: 2 + burn] = False
+    ev = _evaluated(X, period_s)
 
     imm = IMM(**p.imm_arguments(), x0=x0, P0=P0, mu0=mu0, gate_probability=gate_probability)
     turning_modes = np.asarray(p.turning_modes(), dtype=bool)
@@ -317,6 +444,12 @@ def evaluate(
     by_rate = np.abs(np.degrees(est[..., 4])) >= RATE_FLAG_DEG_S
     e_imm, e_cv = est[..., :4] - X[..., :4], cv - X[..., :4]
     ni = nis[ev & np.isfinite(nis)]
+    onset_s = since_onset(X[..., 4], period_s)
+    onset = []
+    for lo, hi in zip(ONSET_BINS_S[:-1], ONSET_BINS_S[1:]):
+        b = turning & (onset_s >= lo) & (onset_s < hi)
+        share = float(b.sum() / max(turning.sum(), 1))
+        onset.append((lo, hi, share, float(right[b].mean()) if b.any() else float("nan")))
     return Evaluation(
         sigma_m=sigma_m,
         period_s=period_s,
@@ -341,4 +474,5 @@ def evaluate(
         straight_rate_flagged=float(by_rate[straight].mean()),
         gated=gated,
         cv_grid=grid,
+        onset=onset,
     )

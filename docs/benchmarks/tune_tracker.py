@@ -6,9 +6,17 @@
 DIR holds the traffic 2.8.1 ``calibration/*.json.gz`` samples (never committed). Flights in
 name order: even positions are the training half, odd the test half. Each candidate is a
 JSON object of :class:`~airspace_sim.dynamics.presets.Preset` fields changed on ``--preset``
-(default imm-ct; ``ct_sigma_turn_rate`` in deg/s per √s here); one line per candidate:
+(default imm-ct; rates in deg/s and σ_Ω in deg/s per √s here); one line per candidate:
 IMM / best-tuned CV position RMSE, turning and straight seconds flagged (right sign), NIS.
-The CV grid is searched once per run (all of CV_SIGMA_GRID).
+The CV grid is searched once per run (all of CV_SIGMA_GRID). A candidate may change the
+number of modes (``turn_rates`` with ``estimated_turn_rate``, ``sojourn_s``,
+``switch_probabilities`` and every per-mode σ for the new modes), e.g. the 4-mode set
+quiet CV, steady CT, roll-in/roll-out CT (larger σ_Ω), manoeuvring CV:
+
+    --candidate '{"turn_rates": [0, 2, 2, 0], "estimated_turn_rate": [0, 1, 1, 0],
+      "filter_mode_sigma_accel": [0.3, 1.5, 1.5, 5], "filter_mode_sigma_turn_rate":
+      [0.3, 0.3, 1.5, 0.3], "sojourn_s": [120, 60, 15, 10], "switch_probabilities":
+      [[0, 0.7, 0.2, 0.1], [0.5, 0, 0.4, 0.1], [0.3, 0.6, 0, 0.1], [0.4, 0.3, 0.3, 0]]}'
 """
 
 from __future__ import annotations
@@ -20,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from airspace_sim.dynamics import presets
+from airspace_sim.dynamics import markov, presets
 from airspace_sim.recorded import read
 from airspace_sim.tracking.consistency import CV_SIGMA_GRID
 from airspace_sim.tracking.evaluation import evaluate, resample
@@ -44,25 +52,41 @@ def truths_of(files, period):
 
 
 def candidate(base, changes: dict):
+    """``base`` with the JSON ``changes``; rates in deg/s (``turn_rates``) and deg/s per √s
+    (``ct_sigma_turn_rate``, ``filter_mode_sigma_turn_rate``) here, radians in the preset."""
     changes = dict(changes)
     if "ct_sigma_turn_rate" in changes:
         changes["ct_sigma_turn_rate"] = math.radians(changes["ct_sigma_turn_rate"])
-    for k in ("filter_mode_sigma_accel", "sojourn_s"):
+    for k in ("turn_rates", "filter_mode_sigma_turn_rate"):
+        if k in changes:
+            changes[k] = tuple(math.radians(v) for v in changes[k])
+    for k in ("filter_mode_sigma_accel", "sojourn_s", "estimated_turn_rate"):
         if k in changes:
             changes[k] = tuple(changes[k])
     if "switch_probabilities" in changes:
         changes["switch_probabilities"] = tuple(map(tuple, changes["switch_probabilities"]))
+    if "turn_rates" in changes and len(changes["turn_rates"]) != base.n_modes:
+        # another number of modes: Π (and every per-mode field) must come with it
+        sojourn = changes.get("sojourn_s", base.sojourn_s)
+        switch = changes.get("switch_probabilities")
+        if sojourn is None or len(sojourn) != len(changes["turn_rates"]) or switch is None:
+            raise SystemExit("a candidate with another number of modes needs sojourn_s and "
+                             "switch_probabilities for its modes")  # fmt: skip
+        changes["transition_matrix"] = markov.transition_matrix_from_sojourn(
+            sojourn, base.dt, switch
+        )
+        changes["sojourn_s"], changes["initial_mode_probabilities"] = sojourn, None
     return base.with_(**changes)
 
 
-def main() -> None:
+def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("directory", type=Path)
     ap.add_argument("--split", choices=("train", "test"), default="train")
     ap.add_argument("--period", type=float, default=4.0)
     ap.add_argument("--preset", default="imm-ct")
     ap.add_argument("--candidate", action="append", default=[])
-    a = ap.parse_args()
+    a = ap.parse_args(argv)
     files = split(a.directory, a.split)
     sigma = SIGMA_BY_PERIOD[a.period]
     truths = truths_of(files, a.period)
