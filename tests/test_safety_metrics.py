@@ -131,6 +131,34 @@ def test_pair_scan_over_many_grid_cells_matches_brute_force():
     assert len(m._predicted) == len(pred) and (m._predicted.get(sorted(pred)) >= 0).all()
 
 
+def test_pair_scan_flags_pairs_at_the_edge_of_the_reach():
+    # head-on pairs of the fastest aircraft, apart by d = r_safe + look·2v ∓ 2 m (the
+    # farthest a predicted conflict can be, inside the reach by its slack only): the
+    # nearer of each is predicted, the farther not; and pairs whose well-clear test
+    # lies on its own boundary. 40 aircraft, so the scan uses the grid; both sets must be
+    # those of the scalar definitions over all pairs
+    v, r_safe, look = 230.0, 3000.0, 120.0
+    edge = r_safe + look * 2 * v
+    pos, vel = [], []
+    for k, d in enumerate([edge - 2.0, edge + 2.0, DMOD_M, DMOD_M + 1e-9, 1e4]):
+        y = 3e5 * k
+        pos += [(0.0, y), (d, y)]
+        vel += [(v, 0.0), (-v, 0.0)]
+    rng = np.random.default_rng(11)
+    for _ in range(30):  # traffic far from the pairs above, to get past the one-cell case
+        pos.append((rng.uniform(5e5, 9e5), rng.uniform(0, 1e6)))
+        vel.append(tuple(rng.uniform(-v, v, 2) / np.sqrt(2)))
+    pos, vel = np.array(pos), np.array(vel)
+    n = len(pos)
+    reach = pair_reach(np.hypot(*vel.T).max(), DMOD_M, TAU_MOD_S, r_safe, look)
+    assert edge < reach < edge + 100.0
+    active, following = np.ones(n, bool), np.zeros(n, bool)
+    m, wcv, pred = safety_and_brute_force(pos, vel, active, following, r_safe, look)
+    assert 0 * n + 1 in pred and 2 * n + 3 not in pred  # the nearer edge pair, not the farther
+    assert len(m._predicted) == len(pred) and (m._predicted.get(sorted(pred)) >= 0).all()
+    assert set(m._wcv_prev.tolist()) == wcv and {4 * n + 5, 8 * n + 9} <= wcv
+
+
 def test_metrics_of_a_sparse_2000_aircraft_world_hold_no_all_pairs_array():
     # 2000 aircraft over 1000 km: a few thousand pairs in the 40 km range out of ~2 million
     rng = np.random.default_rng(7)
