@@ -60,6 +60,24 @@ def pair_keys(keys: np.ndarray, owner: np.ndarray, intruder: np.ndarray) -> np.n
         return mix(keys[owner] ^ mix(keys[intruder] + _GOLDEN))
 
 
+def directed_pairs(i, j, owners, present, keys):
+    """The ordered pairs of the unordered pairs ``(i, j)`` (P,) int64 that an ownship
+    measures, and their :func:`pair_keys`: ``(owner (D,), intruder (D,), pair keys (D,)
+    uint64)``, first the pairs ``i → j`` then ``j → i``, each in the order of ``(i, j)``,
+    kept where ``owners[owner] & present[owner] & present[intruder]`` ((N,) bool each);
+    ``keys`` (N,) uint64 per aircraft. One pass, the keys hashed in it: the same arrays as
+    concatenating, masking and :func:`pair_keys` in numpy."""
+    i = np.ascontiguousarray(i, dtype=np.int64)
+    j = np.ascontiguousarray(j, dtype=np.int64)
+    return _directed_pairs_kernel(
+        i,
+        j,
+        np.ascontiguousarray(owners, dtype=np.bool_),
+        np.ascontiguousarray(present, dtype=np.bool_),
+        np.ascontiguousarray(keys, dtype=np.uint64),
+    )
+
+
 def _counter_word(stream: int, step: int) -> np.uint64:
     word = (int(stream) * 0x100000001B3 + int(step) * 0x2545F4914F6CDD1D + 1) % (1 << 64)
     return mix(np.array([word], dtype=np.uint64))[0]
@@ -71,6 +89,25 @@ def _mix_scalar(z):  # pragma: no cover - compiled
     z = (z ^ (z >> _S30)) * _M1
     z = (z ^ (z >> _S27)) * _M2
     return z ^ (z >> _S31)
+
+
+@njit(cache=True)
+def _directed_pairs_kernel(i, j, owners, present, keys):  # pragma: no cover - compiled
+    """:func:`directed_pairs` (checked arguments)."""
+    p = i.size
+    owner = np.empty(2 * p, dtype=np.int64)
+    intruder = np.empty(2 * p, dtype=np.int64)
+    pk = np.empty(2 * p, dtype=np.uint64)
+    d = 0
+    for direction in range(2):
+        a, b = (i, j) if direction == 0 else (j, i)
+        for q in range(p):
+            o, t = a[q], b[q]
+            if owners[o] and present[o] and present[t]:
+                owner[d], intruder[d] = o, t
+                pk[d] = _mix_scalar(keys[o] ^ _mix_scalar(keys[t] + _GOLDEN))
+                d += 1
+    return owner[:d], intruder[:d], pk[:d]
 
 
 @njit(cache=True)
