@@ -367,13 +367,17 @@ class World:
         if not tracking or not len(view.owner):
             return
         est_mode = true_mode = None
-        markov = self.modes[view.intruder] >= 0
-        if markov.any() and self.tracks.mode_names == self._traffic_mode_names:
+        # (np.take: a row gather ten times faster than fancy indexing; no intruder flies a
+        # Markov mode when no aircraft does)
+        modes = self.modes
+        if (modes >= 0).any() and self.tracks.mode_names == self._traffic_mode_names:
+            markov = np.take(modes, view.intruder) >= 0
             mu = view.mu[markov]
-            if np.isfinite(mu).all():
+            if markov.any() and np.isfinite(mu).all():
                 est_mode = np.argmax(mu, axis=1)
-                true_mode = self.modes[view.intruder[markov]]
-        m.tracking(view.x[:, (0, 2)], self.positions[view.intruder], est_mode, true_mode)
+                true_mode = modes[view.intruder[markov]]
+        true_pos = np.take(self.positions, view.intruder, axis=0)
+        m.tracking(view.x[:, 0:3:2], true_pos, est_mode, true_mode)
 
     def _velocities(self) -> np.ndarray:
         """(N, 2) m/s from speeds and headings (0 for aircraft that left)."""
