@@ -18,7 +18,14 @@ from airspace_sim.scenarios.schema import (
 from airspace_sim.tracking.keymap import KeyMap
 from airspace_sim.world import World
 from airspace_sim.world.bodies import LOS, NMAC, RANGE
-from airspace_sim.world.metrics import DMOD_M, HMD_M, TAU_MOD_S, WorldMetrics, pair_reach
+from airspace_sim.world.metrics import (
+    DMOD_M,
+    HMD_M,
+    TAU_MOD_S,
+    WorldMetrics,
+    pair_reach,
+    pair_reaches,
+)
 from airspace_sim.world.risk import risk_ratio
 
 FT = 0.3048
@@ -129,6 +136,40 @@ def test_pair_scan_over_many_grid_cells_matches_brute_force():
     )
     assert set(m._wcv_prev.tolist()) == wcv
     assert len(m._predicted) == len(pred) and (m._predicted.get(sorted(pred)) >= 0).all()
+
+
+def test_pair_scan_flags_pairs_at_the_edge_of_the_reach():
+    # head-on pairs of the fastest aircraft at the farthest distances each test can flag
+    # (inside its reach by the reach's slack only), ∓ 2 m: a predicted conflict at
+    # d = r_safe + look·2v, a well-clear violation at the positive root of
+    # d² − τ·2v·d − DMOD² = 0 (τ_mod = τ*, HMD 0); and pairs on DMOD. The nearer pair of
+    # each edge is flagged, the farther not. 40 aircraft, so the scan uses the grid; both
+    # sets must be those of the scalar definitions over all pairs
+    v, r_safe, look = 230.0, 3000.0, 120.0
+    pred_edge = r_safe + look * 2 * v
+    wcv_edge = 0.5 * (TAU_MOD_S * 2 * v + math.sqrt((TAU_MOD_S * 2 * v) ** 2 + 4 * DMOD_M**2))
+    apart = [pred_edge - 2.0, pred_edge + 2.0, wcv_edge - 2.0, wcv_edge + 2.0]
+    apart += [DMOD_M, DMOD_M + 1e-9, 1e4]
+    pos, vel = [], []
+    for k, d in enumerate(apart):
+        y = 3e5 * k
+        pos += [(0.0, y), (d, y)]
+        vel += [(v, 0.0), (-v, 0.0)]
+    rng = np.random.default_rng(11)
+    for _ in range(30):  # traffic far from the pairs above, to get past the one-cell case
+        pos.append((rng.uniform(5e5, 9e5), rng.uniform(0, 2e6)))
+        vel.append(tuple(rng.uniform(-v, v, 2) / np.sqrt(2)))
+    pos, vel = np.array(pos), np.array(vel)
+    n = len(pos)
+    wcv_reach, pred_reach = pair_reaches(np.hypot(*vel.T).max(), DMOD_M, TAU_MOD_S, r_safe, look)
+    assert pred_edge < pred_reach < pred_edge + 100.0 and wcv_edge < wcv_reach < wcv_edge + 2
+    active, following = np.ones(n, bool), np.zeros(n, bool)
+    m, wcv, pred = safety_and_brute_force(pos, vel, active, following, r_safe, look)
+    assert 0 * n + 1 in pred and 2 * n + 3 not in pred
+    assert 4 * n + 5 in wcv and 6 * n + 7 not in wcv
+    assert {8 * n + 9, 10 * n + 11, 12 * n + 13} <= wcv
+    assert len(m._predicted) == len(pred) and (m._predicted.get(sorted(pred)) >= 0).all()
+    assert set(m._wcv_prev.tolist()) == wcv
 
 
 def test_metrics_of_a_sparse_2000_aircraft_world_hold_no_all_pairs_array():

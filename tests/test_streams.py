@@ -76,9 +76,11 @@ def test_radar_measure_same_bits(pd, sigma):
             assert 0 < det.sum() < det.size
 
 
-def test_add_normals_equals_two_normal_draws():
-    """The one-pass noise of both axes adds the numbers of two :func:`normal_numpy` draws."""
-    keys = _keys(40)  # 1560 pairs
+@pytest.mark.parametrize("size", [1560, 0, 1, 511, 512, 513, 5000])
+def test_add_normals_equals_two_normal_draws(size):
+    """The one-pass noise of both axes adds the numbers of two :func:`normal_numpy` draws
+    (the kernel evaluates them in chunks of 512 keys, reordered by cos argument)."""
+    keys = _keys(80)[:size]
     z = np.random.default_rng(2).uniform(-1e5, 1e5, (keys.size, 2))
     ref = z.copy()
     ref[:, 0] += 50.0 * streams.normal_numpy(keys, streams.NOISE_X, 7)
@@ -86,4 +88,25 @@ def test_add_normals_equals_two_normal_draws():
     streams.add_normals(z, keys, 50.0, streams.NOISE_X, streams.NOISE_Y, 7)
     np.testing.assert_array_equal(z, ref)
     with pytest.raises(ValueError, match="C-contiguous"):
-        streams.add_normals(np.zeros((2, keys.size)).T, keys, 1.0, 0, 1, 0)
+        streams.add_normals(np.zeros((2, 100)).T, _keys(20)[:100], 1.0, 0, 1, 0)
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 30])
+def test_directed_pairs_equal_concatenate_mask_and_pair_keys(n):
+    rng = np.random.default_rng(n)
+    keys = streams.aircraft_keys(4, n)
+    i, j = np.triu_indices(n, 1)
+    pick = rng.random(i.size) < 0.6
+    i, j = i[pick], j[pick]
+    owners, present = rng.random(n) < 0.7, rng.random(n) < 0.8
+    owner, intruder, pk = streams.directed_pairs(i, j, owners, present, keys)
+    # the numpy expression the surveillance phase used to evaluate
+    o, t = np.concatenate([i, j]), np.concatenate([j, i])
+    keep = owners[o] & present[o] & present[t]
+    o, t = o[keep], t[keep]
+    np.testing.assert_array_equal(owner, o)
+    np.testing.assert_array_equal(intruder, t)
+    assert pk.dtype == np.uint64
+    np.testing.assert_array_equal(pk, streams.pair_keys(keys, o, t))
+    if n == 30:
+        assert 0 < owner.size < 2 * i.size

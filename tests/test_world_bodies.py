@@ -335,3 +335,27 @@ def test_sorted_key_updates_equal_numpy_set_operations():
         gone = rng.integers(0, 200, rng.integers(0, 10))  # unsorted, repeats, absent keys
         assert np.array_equal(_insert_sorted(keys, new), np.union1d(keys, new))
         assert np.array_equal(_delete_sorted(keys, gone), keys[~np.isin(keys, gone)])
+
+
+def test_arbiter_bodies_map_to_aircraft_with_and_without_the_id_map():
+    # the id map (a KeyMap of pymunk body ids) against the sorted-ids binary search it
+    # replaced, and the candidates found through either against brute force (overlapping
+    # candidate circles, radius (R + margin)/2)
+    rng = np.random.default_rng(2)
+    pos = rng.uniform(0.0, 60000.0, (80, 2))
+    sp = Airspace(pos, 3000.0, 1000.0, 10000.0)
+    ids = np.array([b.id for b in sp.bodies], dtype=np.uintp)[rng.permutation(80)]
+    via_map = sp._aircraft_of(ids)
+    sp._id_map = None
+    np.testing.assert_array_equal(via_map, sp._aircraft_of(ids))
+    np.testing.assert_array_equal(via_map, [sp.bodies.index(b) for b in _by_id(sp, ids)])
+    reach = 10000.0 + sp.margin
+    d = np.hypot(*(pos[:, None, :] - pos[None, :, :]).transpose(2, 0, 1))
+    i, j = np.nonzero(np.triu(d < reach, 1))
+    np.testing.assert_array_equal(sp._candidates, np.sort(i * 80 + j))  # through the map
+    np.testing.assert_array_equal(sp._arbiter_keys(), np.sort(i * 80 + j))
+
+
+def _by_id(sp, ids):
+    bodies = {b.id: b for b in sp.bodies}
+    return [bodies[int(x)] for x in ids]

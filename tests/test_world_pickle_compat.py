@@ -17,7 +17,7 @@ def test_world_without_kept_state_resumes_bit_for_bit():
         w.step(np.where(w.controlled, r, np.nan))
     old = pickle.loads(pickle.dumps(w))
     # what a world pickled before these caches existed lacks
-    del old.__dict__["_last_pairs"]
+    old.__dict__.pop("_last_pairs", None)
     for _, ap in old.autopilots:
         for name in ("_rows", "_no_waypoints", "_legs", "_desired"):
             ap.__dict__.pop(name, None)

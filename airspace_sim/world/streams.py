@@ -10,11 +10,14 @@ exist, and nothing is shared between worlds (no module-level mutable state).
 :func:`draw_uniform` and :func:`draw_normal`; :func:`uniform_numpy` and
 :func:`normal_numpy` are the same arithmetic in numpy, the reference the tests compare
 against bit for bit. The integer hash is exact; the normals' log and cos are libm's in
-numba, and numpy's agree with libm's where numpy does not use SIMD versions of them (on
-CPUs where it does, e.g. some AVX-512 builds, a last-ulp difference would fail those tests).
+numba, so the reference takes them from :mod:`math` (libm's too), element by element:
+numpy's own log and cos may be SIMD versions (numpy 2.4's log is on AVX-512 CPUs) that
+differ from libm's in the last bit for a few inputs in a thousand.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from numba import njit
@@ -57,6 +60,24 @@ def pair_keys(keys: np.ndarray, owner: np.ndarray, intruder: np.ndarray) -> np.n
         return mix(keys[owner] ^ mix(keys[intruder] + _GOLDEN))
 
 
+def directed_pairs(i, j, owners, present, keys):
+    """The ordered pairs of the unordered pairs ``(i, j)`` (P,) int64 that an ownship
+    measures, and their :func:`pair_keys`: ``(owner (D,), intruder (D,), pair keys (D,)
+    uint64)``, first the pairs ``i → j`` then ``j → i``, each in the order of ``(i, j)``,
+    kept where ``owners[owner] & present[owner] & present[intruder]`` ((N,) bool each);
+    ``keys`` (N,) uint64 per aircraft. One pass, the keys hashed in it: the same arrays as
+    concatenating, masking and :func:`pair_keys` in numpy."""
+    i = np.ascontiguousarray(i, dtype=np.int64)
+    j = np.ascontiguousarray(j, dtype=np.int64)
+    return _directed_pairs_kernel(
+        i,
+        j,
+        np.ascontiguousarray(owners, dtype=np.bool_),
+        np.ascontiguousarray(present, dtype=np.bool_),
+        np.ascontiguousarray(keys, dtype=np.uint64),
+    )
+
+
 def _counter_word(stream: int, step: int) -> np.uint64:
     word = (int(stream) * 0x100000001B3 + int(step) * 0x2545F4914F6CDD1D + 1) % (1 << 64)
     return mix(np.array([word], dtype=np.uint64))[0]
@@ -68,6 +89,25 @@ def _mix_scalar(z):  # pragma: no cover - compiled
     z = (z ^ (z >> _S30)) * _M1
     z = (z ^ (z >> _S27)) * _M2
     return z ^ (z >> _S31)
+
+
+@njit(cache=True)
+def _directed_pairs_kernel(i, j, owners, present, keys):  # pragma: no cover - compiled
+    """:func:`directed_pairs` (checked arguments)."""
+    p = i.size
+    owner = np.empty(2 * p, dtype=np.int64)
+    intruder = np.empty(2 * p, dtype=np.int64)
+    pk = np.empty(2 * p, dtype=np.uint64)
+    d = 0
+    for direction in range(2):
+        a, b = (i, j) if direction == 0 else (j, i)
+        for q in range(p):
+            o, t = a[q], b[q]
+            if owners[o] and present[o] and present[t]:
+                owner[d], intruder[d] = o, t
+                pk[d] = _mix_scalar(keys[o] ^ _mix_scalar(keys[t] + _GOLDEN))
+                d += 1
+    return owner[:d], intruder[:d], pk[:d]
 
 
 @njit(cache=True)
@@ -105,14 +145,59 @@ def _normal_kernel(keys, word1, word2):  # pragma: no cover - compiled
     return out
 
 
+#: cos arguments per :func:`_add_normals_kernel` chunk (two per key), and the buckets by
+#: argument they are evaluated in
+_NORMALS_CHUNK = 1024
+_COS_BUCKETS = 64
+
+
 @njit(cache=True)
 def _add_normals_kernel(z, keys, scale, w1x, w2x, w1y, w2y):  # pragma: no cover - compiled
     """``z[p, 0] += scale·normal_x[p]``, ``z[p, 1] += scale·normal_y[p]`` in place, z (P, 2),
     keys (P,) uint64; the normals of two streams (counter words ``w1x, w2x`` and
-    ``w1y, w2y``) in one pass over the keys."""
-    for p in range(keys.size):
-        z[p, 0] += scale * draw_normal(keys[p], w1x, w2x)
-        z[p, 1] += scale * draw_normal(keys[p], w1y, w2y)
+    ``w1y, w2y``), each ``√(−2 ln u1)·cos(2π u2)`` exactly as :func:`draw_normal`.
+
+    libm's cos branches on its argument's range (direct polynomial, π/2 − x, or a quadrant
+    reduction and the quadrant's sign and function); over arguments in random order the
+    branches are mispredicted and the cos takes 2.5 times as long as over sorted ones. So
+    the keys go in chunks of ``_NORMALS_CHUNK / 2``: the radii and arguments of a chunk
+    first, then its cos evaluated bucket by bucket of the argument (a counting sort into
+    :data:`_COS_BUCKETS` equal ranges of ``u2``, within the chunk so the scratch stays in
+    cache). Each number is the same function of the same argument, so the same bits.
+    """
+    zf = z.reshape(-1)  # normal q of key p is at 2p + axis
+    rad = np.empty(_NORMALS_CHUNK)
+    arg = np.empty(_NORMALS_CHUNK)
+    bucket = np.empty(_NORMALS_CHUNK, dtype=np.int64)
+    order = np.empty(_NORMALS_CHUNK, dtype=np.int64)
+    start = np.empty(_COS_BUCKETS + 1, dtype=np.int64)
+    half = _NORMALS_CHUNK // 2
+    for c0 in range(0, keys.size, half):
+        c1 = min(c0 + half, keys.size)
+        m = 2 * (c1 - c0)
+        start[:] = 0
+        for p in range(c0, c1):
+            k = keys[p]
+            q = 2 * (p - c0)
+            for axis in range(2):
+                w1 = w1x if axis == 0 else w1y
+                w2 = w2x if axis == 0 else w2y
+                u1 = 1.0 - draw_uniform(k, w1)  # (0, 1]
+                u2 = draw_uniform(k, w2)
+                rad[q + axis] = np.sqrt(-2.0 * np.log(u1))
+                arg[q + axis] = 2.0 * np.pi * u2
+                b = np.int64(u2 * _COS_BUCKETS)  # u2 < 1
+                bucket[q + axis] = b
+                start[b + 1] += 1
+        for b in range(_COS_BUCKETS):
+            start[b + 1] += start[b]
+        for q in range(m):
+            b = bucket[q]
+            order[start[b]] = q
+            start[b] += 1
+        for t in range(m):
+            q = order[t]
+            zf[2 * c0 + q] += scale * (rad[q] * np.cos(arg[q]))
 
 
 def add_normals(
@@ -152,7 +237,10 @@ def uniform_numpy(keys: np.ndarray, stream: int, step: int) -> np.ndarray:
 
 
 def normal_numpy(keys: np.ndarray, stream: int, step: int) -> np.ndarray:
-    """:func:`normal` in numpy (the reference for the kernel)."""
+    """:func:`normal` in numpy (the reference for the kernel); log and cos are libm's, from
+    :mod:`math` (module docstring)."""
     u1 = 1.0 - uniform_numpy(keys, 2 * stream + 1000, step)  # (0, 1]
     u2 = uniform_numpy(keys, 2 * stream + 1001, step)
-    return np.sqrt(-2.0 * np.log(u1)) * np.cos(2.0 * np.pi * u2)
+    log_u1 = np.array([math.log(u) for u in u1.reshape(-1)]).reshape(u1.shape)
+    cos_u2 = np.array([math.cos(a) for a in (2.0 * np.pi * u2).reshape(-1)]).reshape(u2.shape)
+    return np.sqrt(-2.0 * log_u1) * cos_u2
