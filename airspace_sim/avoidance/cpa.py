@@ -394,15 +394,36 @@ def _key_less(am, al, ai, bm, bl, bi):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
+def _grid_inside(lim, all_v, all_m, all_l, all_i, fv, fm, fl, fi):  # pragma: no cover
+    """The grid entries with ``|ψ| ≤ lim``, in the grid's preference order
+    (:func:`_grid_order`'s arrays), into ``fv``, ``fm``, ``fl``, ``fi``; returns their
+    number. Rows of one limit share them (the callers keep the last limit's)."""
+    nf = 0
+    for q in range(all_v.size):
+        if abs(all_v[q]) <= lim:
+            fv[nf], fm[nf], fl[nf], fi[nf] = all_v[q], all_m[q], all_l[q], all_i[q]
+            nf += 1
+    return nf
+
+
+@njit(inline="always")
+def _row_limit(mx_n):  # pragma: no cover - compiled
+    """The limit ``|ψ| ≤`` this of a row's candidates (:func:`candidate_grid`'s test)."""
+    return mx_n * (1 + 1e-12) + 1e-15
+
+
+@njit(cache=True, error_model="numpy")
 def _sort_row(
     mx_n,
     extra_row,
     n_used,
     left_penalty,
-    all_v,
-    all_m,
-    all_l,
-    all_i,
+    fv,
+    fm,
+    fl,
+    fi,
+    nf,
+    n_grid,
     out,
     origin,
     usable,
@@ -415,13 +436,14 @@ def _sort_row(
     nt,
 ):  # pragma: no cover - compiled
     """One row of :func:`_preferred_kernel` into ``out`` (C,), with ``origin`` (C,) (grid
-    index or −1) and ``usable`` (C,) (not NaN); the other arrays are scratch. Only the
+    index or −1) and ``usable`` (C,) (not NaN). ``fv``, ``fm``, ``fl``, ``fi``: the first
+    ``nf`` of them the entries of the ``n_grid`` grid inside the row's limit, in
+    preference order (:func:`_grid_inside`); the other arrays are scratch. Only the
     first ``n_used`` extras are read, the others taken as NaN (the boundary roots packed
     by :func:`~airspace_sim.avoidance.heading.boundary_roots_in_window`). Returns the
     number of leading entries that hold every usable one."""
-    n_grid = all_v.size
     n_extra = extra_row.size
-    lim = mx_n * (1 + 1e-12) + 1e-15
+    lim = _row_limit(mx_n)
     # the limits and extras of finite mag (inside the limit) to sort; the others into the
     # tail lists in listing order: (inf, right) — NaN ranks as mag = inf, right — (inf,
     # left), then the grid's NaN and NaN mag (a NaN left_penalty). An extra's roots are
@@ -465,18 +487,11 @@ def _sort_row(
         perm[k + 1] = p
     # merge the grid's entries inside the limit (in the grid's order) with them
     q = i = o = 0
-    n_out = 0  # grid entries outside the limit: NaN, at the head of the third tail list
-    while True:
-        while q < n_grid and not (abs(all_v[q]) <= lim):
-            q += 1
-            n_out += 1
-        if q >= n_grid and i >= nx:
-            break
+    while q < nf or i < nx:
         if i >= nx or (
-            q < n_grid
-            and _key_less(all_m[q], all_l[q], all_i[q], xm[perm[i]], xl[perm[i]], xi[perm[i]])
+            q < nf and _key_less(fm[q], fl[q], fi[q], xm[perm[i]], xl[perm[i]], xi[perm[i]])
         ):
-            out[o], origin[o] = all_v[q], all_i[q]
+            out[o], origin[o] = fv[q], fi[q]
             q += 1
         else:
             out[o], origin[o] = xv[perm[i]], -1
@@ -486,7 +501,7 @@ def _sort_row(
     n_scan = o
     for t in range(4):
         if t == 2:
-            for _ in range(n_out):
+            for _ in range(n_grid - nf):
                 out[o], origin[o], usable[o] = np.nan, -1, False
                 o += 1
         for e in range(nt[t]):
@@ -527,16 +542,23 @@ def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - comp
     perm = np.empty(n_cand, np.int64)
     tail = np.empty((4, n_cand))
     nt = np.zeros(4, np.int64)
+    fv, fm, fl, fi = all_v.copy(), all_m.copy(), all_l.copy(), all_i.copy()
+    nf, last = -1, np.nan
     for n in range(n_own):
+        lim = _row_limit(mx[n])
+        if nf < 0 or not lim == last:
+            nf, last = _grid_inside(lim, all_v, all_m, all_l, all_i, fv, fm, fl, fi), lim
         _sort_row(
             mx[n],
             extra[n],
             n_extra,
             left_penalty,
-            all_v,
-            all_m,
-            all_l,
-            all_i,
+            fv,
+            fm,
+            fl,
+            fi,
+            nf,
+            grid.size,
             out[n],
             origin[n],
             usable,
@@ -603,6 +625,8 @@ def band_rows(
     blockers = np.empty(2, dtype=np.int64)
     inv_r2 = np.empty(n_int)
     cs, sn = np.cos(0.0), np.sin(0.0)
+    fv, fm, fl, fi = all_v.copy(), all_m.copy(), all_l.copy(), all_i.copy()
+    nf, last = -1, np.nan
     for n in range(n_own):
         # _cpa_kernel at ψ = 0, its operations in its order
         rvx = cs * vo[n, 0] - sn * vo[n, 1]
@@ -613,15 +637,20 @@ def band_rows(
                 b = min(b, _pair_ratio2(vo, r, v, radius, n, k, rvx, rvy, lookahead_s))
         ratio0[n] = np.sqrt(b)
         _row_inverse_r2(radius, valid, n, inv_r2)
+        lim = _row_limit(mx[n])
+        if nf < 0 or not lim == last:
+            nf, last = _grid_inside(lim, all_v, all_m, all_l, all_i, fv, fm, fl, fi), lim
         n_scan = _sort_row(
             mx[n],
             extra[n],
             n_extra[n],
             left_penalty,
-            all_v,
-            all_m,
-            all_l,
-            all_i,
+            fv,
+            fm,
+            fl,
+            fi,
+            nf,
+            grid.size,
             cand[n],
             origin,
             usable,

@@ -237,6 +237,28 @@ def _window_cos(limit):  # pragma: no cover - compiled
     return np.cos(limit) if limit < np.pi else -np.inf
 
 
+@njit(inline="always", error_model="numpy")
+def _may_have_roots(a, b, c, cos_min):  # pragma: no cover - compiled
+    """False only where ``a cos ψ + b sin ψ = c`` certainly has no root (``c² > (a² + b²)
+    (1 + 10⁻⁹)``), or where both roots certainly lie outside the window (their cosines
+    below ``cos_min``, from ``amp = √(a² + b²)`` within a few ulp of ``hypot``, on roots
+    well apart): both without libm's ``hypot``. Elsewhere, and when ``a² + b²`` is so
+    large or small that it could have overflowed or underflowed, True (decide exactly)."""
+    amp2 = a * a + b * b
+    if not (1e-280 < amp2 < 1e280):
+        return True
+    c2 = c * c
+    if c2 > amp2 * (1.0 + 1e-9):
+        return False
+    if cos_min > -np.inf and c2 < amp2 * (1.0 - 1e-9):
+        amp = np.sqrt(amp2)
+        cphi, sphi, ch = a / amp, b / amp, c / amp
+        sh = np.sqrt(max(1.0 - ch * ch, 0.0))
+        if cphi * ch + sphi * sh < cos_min and cphi * ch - sphi * sh < cos_min:
+            return False
+    return True
+
+
 @njit(cache=True, error_model="numpy")
 def _pair_roots(
     vox, voy, sv, vv, bx, by, vix, viy, rad, lookahead_s, cos_lim, out
@@ -247,8 +269,10 @@ def _pair_roots(
     A root whose cosine, from the angle-sum formula (``cos φ = a/amp``, ``cos h = c/amp``,
     ``sin h = √(1 − cos²h)``, error ≲ 2·10⁻⁸), is below ``cos_lim`` − :data:`_WINDOW_GUARD`
     lies outside ``|ψ| ≤ limit`` (:func:`_window_cos`) and is left NaN without its
-    ``atan2``, ``acos`` and wrap: the candidate sort drops such roots anyway. A root inside
-    the window, or near its edge, is computed as the numpy reference computes it.
+    ``atan2``, ``acos`` and wrap: the candidate sort drops such roots anyway. Equations
+    with certainly no root, or both roots outside, skip ``hypot`` too
+    (:func:`_may_have_roots`). A root inside the window, or near its edge, is computed as
+    the numpy reference computes it.
     """
     out[:] = np.nan
     # tangent_direction: line of sight rotated by ±β
@@ -270,6 +294,8 @@ def _pair_roots(
         a = _sum2(nx * vox, ny * voy)
         b = _sum2(nx * -voy, ny * vox)
         c = _sum2(nx * vix, ny * viy)
+        if not _may_have_roots(a, b, c, cos_min):
+            continue
         # scalar _solve_cos_sin (no atan2 without a root); amp once for both uses
         amp = np.hypot(a, b)
         if not (abs(c / amp) <= 1.0):
@@ -302,6 +328,8 @@ def _pair_roots(
     a = _sum2(px * vox, py * voy)
     b = _sum2(px * -voy, py * vox)
     c = (_sum2(px * px, py * py) + t * t * vv - rad * rad) / (2.0 * t)
+    if not _may_have_roots(a, b, c, cos_min):
+        return
     amp = np.hypot(a, b)
     if not (abs(c / amp) <= 1.0):
         return
