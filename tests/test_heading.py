@@ -327,3 +327,31 @@ def test_roots_in_window_are_the_kernel_roots_inside_the_window(seed):
         else:
             assert np.array_equal(g, roots)
     assert kept_some_out
+
+
+def test_root_screen_only_drops_equations_without_roots_in_the_window():
+    # _may_have_roots is False only where a cos ψ + b sin ψ = c has no root by the exact
+    # test (|c / hypot(a, b)| ≤ 1), or both of its roots (as _solve_cos_sin computes them)
+    # are outside the window; equations right at the edge (|c| = amp within 1e-9) and far
+    # from it, windows of several widths
+    from airspace_sim.avoidance.heading import _may_have_roots, _solve_cos_sin
+
+    rng = np.random.default_rng(21)
+    n = 20000
+    a, b = rng.normal(0.0, 200.0, (2, n))
+    amp = np.hypot(a, b)
+    c = (
+        amp
+        * rng.choice([-1.0, 1.0], n)
+        * (1.0 + rng.choice([0.0, 1e-12, 1e-9, 1e-6, 0.3], n) * rng.choice([-1.0, 1.0], n))
+    )
+    c[: n // 4] = rng.uniform(-1.2, 1.2, n // 4) * amp[: n // 4]
+    limit = rng.choice([0.1, 1.0, np.pi / 2, 3.0], n)
+    cos_min = np.cos(limit) - 1e-6
+    roots = _solve_cos_sin(a, b, c)
+    got = np.array([_may_have_roots(a[i], b[i], c[i], cos_min[i]) for i in range(n)])
+    none = ~(np.abs(c / amp) <= 1.0)
+    outside = (np.abs(roots) > limit[:, None]).all(axis=1)
+    assert (none | outside)[~got].all()
+    assert (~got & none).sum() > 1000 and (~got & ~none).sum() > 1000  # both reasons occur
+    assert got[none].sum() > 10  # at the edge the exact test decides
