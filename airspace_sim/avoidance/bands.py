@@ -322,12 +322,18 @@ def band_search(
             np.ascontiguousarray(wanted),
         )
         band = ratio = None
-        psi_at = lambda idx: np.where(idx >= 0, cand[rows, np.maximum(idx, 0)], 0.0)  # noqa: E731
-        score = lambda idx: np.where(  # noqa: E731
-            idx >= 0,
-            cpa_min_ratio(vo, r, v, valid, psi_at(idx)[:, None], radius, lookahead_s)[:, 0],
-            -np.inf,
-        )
+        radius_rows = np.broadcast_to(radius, valid.shape)
+
+        def score(idx):  # the ratio of the candidates idx (−1: −inf), on the rows with one
+            out = np.full(n, -np.inf)
+            sel = np.flatnonzero(idx >= 0)
+            if sel.size:
+                psi = cand[sel, idx[sel]][:, None]
+                out[sel] = cpa_min_ratio(
+                    vo[sel], r[sel], v[sel], valid[sel], psi, radius_rows[sel], lookahead_s
+                )[:, 0]
+            return out
+
     else:
         extra = None
         if exact_candidates and r.shape[1] > 0:
