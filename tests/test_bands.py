@@ -427,6 +427,8 @@ def test_first_clear_search_equals_the_full_band(seed):  # noqa: D103
     full = band_search(vo, r, vi - vo[:, None], valid, mx, 3000.0, 120.0, 0.1)
     fast = band_search(vo, r, vi - vo[:, None], valid, mx, 3000.0, 120.0, 0.1, full=False)
     assert fast.band is None
+    # the same sorted candidates, though the fast path sorts only the roots in the window
+    assert np.array_equal(fast.candidates, full.candidates, equal_nan=True)
     np.testing.assert_array_equal(fast.heading_change, full.heading_change)
     np.testing.assert_array_equal(fast.conflict, full.conflict)
     np.testing.assert_array_equal(fast.first_clear, full.first_clear)
@@ -578,3 +580,28 @@ def test_search_kernels_with_intruders_inside_the_radius_equal_the_full_band(see
     best = full.min_ratio[rows, full.best_blocked[rows, 0]]
     now = np.sqrt(np.min(np.where(valid, np.sum(r * r, -1), np.inf), axis=1))[rows] / radius
     assert (best <= now).all() and (best == now).sum() > 10
+
+
+def test_clear_ratio2_is_the_square_root_test():
+    # q2 >= clear_ratio2(t) decides like np.sqrt(q2) >= t, at and around the edge, for the
+    # band search's threshold and others
+    from airspace_sim.avoidance.cpa import clear_ratio2
+
+    rng = np.random.default_rng(3)
+    ts = np.concatenate([[1.0 - CLEAR_TOLERANCE, 1.0, 0.5, 1e-160, 3e150], rng.uniform(0, 4, 300)])
+    for t in ts:
+        x0 = clear_ratio2(t)
+        q2 = np.concatenate([[x0, t * t, 0.0, np.inf, np.nan], rng.uniform(0, 2, 20) * t * t])
+        near = x0
+        for _ in range(4):
+            near = np.nextafter(near, 0.0)
+            q2 = np.append(q2, near)
+        near = x0
+        for _ in range(4):
+            near = np.nextafter(near, np.inf)
+            q2 = np.append(q2, near)
+        with np.errstate(invalid="ignore"):
+            assert np.array_equal(q2 >= x0, np.sqrt(q2) >= t)
+        assert np.sqrt(x0) >= t and not np.sqrt(np.nextafter(x0, 0.0)) >= t
+    assert clear_ratio2(0.0) == -np.inf and clear_ratio2(np.inf) == np.inf
+    assert np.isnan(clear_ratio2(np.nan))

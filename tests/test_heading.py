@@ -263,3 +263,95 @@ def test_tangent_ray_test_is_the_reference_decision_near_its_threshold():
         e = rng.uniform(-5e-8, 5e-8, 2)
         got = _on_tangent_ray(psi, np.cos(psi) + e[0], np.sin(psi) + e[1], *vo, *vi, *u, scale)
         assert got == ref
+
+
+def test_wrap_kernel_is_numpy_wrap_angle_bit_for_bit():
+    # the kernel's wrap skips fmod for |x + π| < 4π; on and around every branch edge, far
+    # outside them, and at signed zeros, it must give numpy's bits
+    from airspace_sim.avoidance.heading import _wrap
+
+    rng = np.random.default_rng(12)
+    edges = np.pi * np.array([-5.0, -3.0, -1.0, 0.0, 1.0, 3.0, 5.0, 7.0, -7.0])
+    x = np.concatenate(
+        [
+            rng.uniform(-3 * np.pi, 3 * np.pi, 20000),
+            rng.uniform(-1e4, 1e4, 2000),
+            edges,
+            np.nextafter(edges, np.inf),
+            np.nextafter(edges, -np.inf),
+            [0.0, -0.0, 2 * np.pi, -2 * np.pi, 1e300, -1e300],
+        ]
+    )
+    got = np.array([_wrap(v) for v in x])
+    ref = wrap_angle(x)
+    assert np.array_equal(got, ref) and np.array_equal(np.signbit(got), np.signbit(ref))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_roots_in_window_are_the_kernel_roots_inside_the_window(seed):
+    # boundary_roots_in_window keeps, per row and in order, the roots of
+    # boundary_heading_changes: all of those with |ψ| ≤ limit (same bits), only roots of
+    # that kernel, none far outside the window; limits 0, small, 90°, just below π, π,
+    # beyond π and NaN
+    from airspace_sim.avoidance.heading import boundary_heading_changes, boundary_roots_in_window
+
+    rng = np.random.default_rng(30 + seed)
+    n, k = 300, 15
+    vo = rotate(np.array([230.0, 0.0]), rng.uniform(-np.pi, np.pi, n))
+    r = rng.uniform(-25000.0, 25000.0, (n, k, 2))
+    r[:, :2] *= 0.1  # some inside the radius
+    vi = rotate(
+        np.stack([rng.uniform(0.0, 460.0, (n, k)), np.zeros((n, k))], -1),
+        rng.uniform(-np.pi, np.pi, (n, k)),
+    )
+    valid = rng.random((n, k)) < 0.85
+    radius = np.full((n, k), 3300.0)
+    limit = rng.choice([0.0, 0.05, np.pi / 2, np.pi - 1e-9, np.pi, 4.0, np.nan], n)
+    limit[:20] = np.pi / 2
+    full = boundary_heading_changes(vo, r, vi, valid, radius, 120.0).reshape(n, -1)
+    got, count = boundary_roots_in_window(vo, r, vi, valid, radius, 120.0, limit)
+    assert got.shape == full.shape
+    kept_some_out = False
+    for i in range(n):
+        roots = full[i][~np.isnan(full[i])]
+        g = got[i, : count[i]]
+        assert np.isnan(got[i, count[i] :]).all() and not np.isnan(g).any()
+        # a subsequence of the kernel's roots, holding every one inside the window
+        it = iter(roots)
+        assert all(any(x == y for y in it) for x in g)
+        inside = roots[np.abs(roots) <= limit[i]]
+        assert np.array_equal(g[np.abs(g) <= limit[i]], inside)
+        if limit[i] < np.pi:  # outside by more than the guard: left out
+            assert (np.cos(g) >= np.cos(limit[i]) - 1e-5).all()
+            kept_some_out |= count[i] < roots.size
+        else:
+            assert np.array_equal(g, roots)
+    assert kept_some_out
+
+
+def test_root_screen_only_drops_equations_without_roots_in_the_window():
+    # _may_have_roots is False only where a cos ψ + b sin ψ = c has no root by the exact
+    # test (|c / hypot(a, b)| ≤ 1), or both of its roots (as _solve_cos_sin computes them)
+    # are outside the window; equations right at the edge (|c| = amp within 1e-9) and far
+    # from it, windows of several widths
+    from airspace_sim.avoidance.heading import _may_have_roots, _solve_cos_sin
+
+    rng = np.random.default_rng(21)
+    n = 20000
+    a, b = rng.normal(0.0, 200.0, (2, n))
+    amp = np.hypot(a, b)
+    c = (
+        amp
+        * rng.choice([-1.0, 1.0], n)
+        * (1.0 + rng.choice([0.0, 1e-12, 1e-9, 1e-6, 0.3], n) * rng.choice([-1.0, 1.0], n))
+    )
+    c[: n // 4] = rng.uniform(-1.2, 1.2, n // 4) * amp[: n // 4]
+    limit = rng.choice([0.1, 1.0, np.pi / 2, 3.0], n)
+    cos_min = np.cos(limit) - 1e-6
+    roots = _solve_cos_sin(a, b, c)
+    got = np.array([_may_have_roots(a[i], b[i], c[i], cos_min[i]) for i in range(n)])
+    none = ~(np.abs(c / amp) <= 1.0)
+    outside = (np.abs(roots) > limit[:, None]).all(axis=1)
+    assert (none | outside)[~got].all()
+    assert (~got & none).sum() > 1000 and (~got & ~none).sum() > 1000  # both reasons occur
+    assert got[none].sum() > 10  # at the edge the exact test decides

@@ -28,16 +28,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
 from airspace_sim.avoidance.cpa import (
-    best_blocked_search,
+    _preferred_kernel,
+    band_rows,
     cpa_min_ratio,
     cpa_min_ratio_turning,
-    first_clear_search,
 )
 from airspace_sim.avoidance.heading import (
     boundary_heading_changes,
+    boundary_roots_in_window,
     range_at_time_heading_changes,
     tangent_heading_changes,
     wrap_angle,
@@ -180,143 +180,6 @@ def preferred_candidates_on_grid(max_heading_change, resolution, extra, left_pen
     return cand, grid, origin
 
 
-@njit(cache=True, error_model="numpy")
-def _merge(av, am, al, ai, na, bv, bm, bl, bi, nb, ov, om, ol, oi, start):  # pragma: no cover
-    """Merge two runs sorted by the key ``(mag, left, index)`` into ``o*[start:]``."""
-    i = j = 0
-    o = start
-    while i < na or j < nb:
-        take_a = j >= nb or (
-            i < na
-            and (
-                am[i] < bm[j]
-                or (am[i] == bm[j] and (al[i] < bl[j] or (al[i] == bl[j] and ai[i] < bi[j])))
-            )
-        )
-        if take_a:
-            ov[o], om[o], ol[o], oi[o] = av[i], am[i], al[i], ai[i]
-            i += 1
-        else:
-            ov[o], om[o], ol[o], oi[o] = bv[j], bm[j], bl[j], bi[j]
-            j += 1
-        o += 1
-    return o
-
-
-@njit(cache=True, error_model="numpy")
-def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - compiled
-    """Rows of ``[grid (G,), −mx[n], mx[n], extra[n] (E,)]`` (NaN outside ``±mx[n]``), sorted.
-
-    The order is the lexsort key ``(mag, ψ > 0, index)``, ``mag = |ψ| (+ left_penalty)``.
-    The entries of finite ``mag`` form two runs already sorted by that key — the grid's
-    (its right turns by decreasing index merged with its left turns by increasing index,
-    once for the whole grid, ``grid`` increasing; a row keeps the entries inside its
-    limit in that order) and the limits and extras after an insertion sort by the whole
-    key (a few dozen per row; of an index permutation, one move per shift) — which are
-    merged. The ``inf`` and then NaN ``mag`` entries follow in the listing order, which is
-    where the lexsort puts them (every NaN here is the same ``np.nan``). Returns the
-    sorted rows (n_own, C) and the grid index of each entry (−1: not from the grid).
-    """
-    n_own, n_extra = extra.shape
-    n_grid = grid.size
-    n_cand = n_grid + 2 + n_extra
-    split = 0  # grid[:split] ≤ 0 (right turns or ahead), grid[split:] > 0
-    while split < n_grid and not grid[split] > 0.0:
-        split += 1
-    out = np.empty((n_own, n_cand))
-    origin = np.full((n_own, n_cand), -1, dtype=np.int64)
-    rv, rm, rl, ri = (
-        np.empty(n_cand),
-        np.empty(n_cand),
-        np.empty(n_cand, np.bool_),
-        np.empty(n_cand, np.int64),
-    )
-    lv, lm, ll, li = rv.copy(), rm.copy(), rl.copy(), ri.copy()
-    gv, gm, gl, gi = rv.copy(), rm.copy(), rl.copy(), ri.copy()
-    xv, xm, xl, xi = rv.copy(), rm.copy(), rl.copy(), ri.copy()
-    sv, sm, sl, si = rv.copy(), rm.copy(), rl.copy(), ri.copy()
-    ov, om, ol, oi = rv.copy(), rm.copy(), rl.copy(), ri.copy()
-    perm = np.empty(n_cand, np.int64)
-    tail = np.empty((4, n_cand))
-    nt = np.zeros(4, np.int64)
-    # the whole grid's order: its right turns by decreasing index merged with its left
-    # turns by increasing index
-    nr = 0
-    for j in range(split - 1, -1, -1):
-        rv[nr], rm[nr], rl[nr], ri[nr] = grid[j], abs(grid[j]), False, j
-        nr += 1
-    nl = 0
-    for j in range(split, n_grid):
-        lv[nl], lm[nl], ll[nl], li[nl] = grid[j], abs(grid[j]) + left_penalty, True, j
-        nl += 1
-    n_all = _merge(rv, rm, rl, ri, nr, lv, lm, ll, li, nl, ov, om, ol, oi, 0)
-    all_v, all_m, all_l, all_i = (
-        ov[:n_all].copy(),
-        om[:n_all].copy(),
-        ol[:n_all].copy(),
-        oi[:n_all].copy(),
-    )
-    for n in range(n_own):
-        lim = mx[n] * (1 + 1e-12) + 1e-15
-        # the grid entries inside the limit, in the grid's order; the others are NaN
-        ng = 0
-        for q in range(n_all):
-            if abs(all_v[q]) <= lim:
-                gv[ng], gm[ng], gl[ng], gi[ng] = all_v[q], all_m[q], all_l[q], all_i[q]
-                ng += 1
-        # the limits and extras of finite mag (inside the limit) to sort; the others into
-        # the tail lists in listing order: (inf, right) — NaN ranks as mag = inf, right —
-        # (inf, left), then the grid's NaN and NaN mag (a NaN left_penalty)
-        nx = 0
-        nt[:] = 0
-        for q in range(n_all - ng):
-            tail[2, q] = np.nan
-        nt[2] = n_all - ng
-        for j in range(n_grid, n_cand):
-            if j == n_grid:
-                c = -mx[n]
-            elif j == n_grid + 1:
-                c = mx[n]
-            else:
-                c = extra[n, j - n_grid - 2]
-            if not (abs(c) <= lim):
-                c = np.nan
-            left = c > 0.0
-            g = np.inf if np.isnan(c) else abs(c) + (left_penalty if left else 0.0)
-            if g < np.inf:
-                xv[nx], xm[nx], xl[nx], xi[nx] = c, g, left, j
-                nx += 1
-            else:
-                q = (0 if g == np.inf else 2) + (1 if left else 0)
-                tail[q, nt[q]] = c
-                nt[q] += 1
-        for i in range(nx):
-            perm[i] = i
-        for i in range(1, nx):
-            p = perm[i]
-            g, lf, ix = xm[p], xl[p], xi[p]
-            k = i - 1
-            while k >= 0:
-                q = perm[k]
-                if xm[q] < g or (xm[q] == g and (xl[q] < lf or (xl[q] == lf and xi[q] < ix))):
-                    break
-                perm[k + 1] = q
-                k -= 1
-            perm[k + 1] = p
-        for i in range(nx):
-            p = perm[i]
-            sv[i], sm[i], sl[i], si[i] = xv[p], xm[p], xl[p], xi[p]
-        m = _merge(gv, gm, gl, gi, ng, sv, sm, sl, si, nx, ov, om, ol, oi, 0)
-        out[n, :m] = ov[:m]
-        for i in range(m):
-            if oi[i] < n_grid:
-                origin[n, i] = oi[i]
-        for q in range(4):
-            out[n, m : m + nt[q]] = tail[q, : nt[q]]
-            m += nt[q]
-    return out, origin
-
-
 def exact_boundary_candidates(own_velocity, rel_position, rel_velocity, valid, radius, lookahead_s):
     """Exact boundary heading changes of each intruder's clear set, ``(N, 6K)`` rad (NaN if none).
 
@@ -335,6 +198,25 @@ def exact_boundary_candidates(own_velocity, rel_position, rel_velocity, valid, r
     radius = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, dtype=float), r.shape[:-1]))
     out = boundary_heading_changes(vo, r, vi, valid, radius, float(lookahead_s))
     return out.reshape(out.shape[0], -1)
+
+
+def exact_boundary_candidates_in_window(
+    own_velocity, rel_position, rel_velocity, valid, radius, lookahead_s, limit
+):
+    """The roots of :func:`exact_boundary_candidates` that may lie in ``|ψ| ≤ limit[n]``
+    (rad), packed to the left: ``(roots (N, 6K) rad, count (N,))``, NaN after the first
+    ``count[n]`` of row ``n``. Every root inside the window is there, in the same order
+    and with the same bits; a root outside it is left out when a cheap cosine test shows
+    it (:func:`~airspace_sim.avoidance.heading.boundary_roots_in_window`), which saves its
+    ``atan2`` and ``acos``. The candidate sort gives the same rows from these as from all
+    the roots."""
+    vo = np.ascontiguousarray(own_velocity, dtype=float)
+    r = np.ascontiguousarray(rel_position, dtype=float)
+    vi = np.ascontiguousarray(np.asarray(rel_velocity, dtype=float) + vo[:, None, :])
+    valid = np.ascontiguousarray(valid, dtype=bool)
+    radius = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, dtype=float), r.shape[:-1]))
+    limit = np.ascontiguousarray(np.broadcast_to(np.asarray(limit, dtype=float), vo.shape[:1]))
+    return boundary_roots_in_window(vo, r, vi, valid, radius, float(lookahead_s), limit)
 
 
 def exact_boundary_candidates_numpy(
@@ -408,62 +290,70 @@ def band_search(
     valid = np.asarray(valid, dtype=bool).reshape(n, -1)
     mx = np.broadcast_to(np.asarray(max_heading_change, dtype=float), (n,))
     radius = np.asarray(r_safe, dtype=float) * (1.0 + margin)
-    extra = None
-    if exact_candidates and r.shape[1] > 0:
-        extra = exact_boundary_candidates(vo, r, v, valid, radius, lookahead_s)
-    # sorted by preference: |ψ| (+ left_penalty for left turns), then right turn (ψ ≤ 0)
-    # first, then original index
-    cand, grid, origin = preferred_candidates_on_grid(mx, resolution, extra, left_penalty)
-    usable = ~np.isnan(cand)
-    rows = np.arange(n)
-    safe = np.where(usable, cand, 0.0)
-    ratio0 = cpa_min_ratio(vo, r, v, valid, np.zeros((n, 1)), radius, lookahead_s)[:, 0]
-    conflict = ~(ratio0 >= 1.0 - CLEAR_TOLERANCE)
     wanted = np.ones((n, 2), dtype=bool)  # (n, 2): best_blocked of (ψ ≤ 0, ψ ≥ 0) wanted
     if committed_side is not None:
         side = np.broadcast_to(np.asarray(committed_side, dtype=float), (n,))
         wanted = np.stack([side <= 0, side >= 0], axis=1)
-    if full or turn_rate is not None:
+    grid = _grid(mx, resolution)
+    # the fast path's kernel needs an increasing grid (always so for a resolution > 0)
+    fast = not full and turn_rate is None and bool(np.all(np.diff(grid) > 0))
+    rows = np.arange(n)
+    if fast:
+        extra, n_extra = np.empty((n, 0)), np.zeros(n, dtype=np.int64)
+        if exact_candidates and r.shape[1] > 0:
+            # only the roots that can lie within ±max_heading_change (the others are not
+            # candidates): the same sorted rows
+            extra, n_extra = exact_boundary_candidates_in_window(
+                vo, r, v, valid, radius, lookahead_s, mx
+            )
+        cand, first, best, ratio0 = band_rows(
+            np.ascontiguousarray(vo),
+            np.ascontiguousarray(r),
+            np.ascontiguousarray(v),
+            np.ascontiguousarray(valid),
+            np.ascontiguousarray(np.broadcast_to(radius, valid.shape)),
+            float(lookahead_s),
+            np.ascontiguousarray(mx),
+            extra,
+            n_extra,
+            grid,
+            float(left_penalty),
+            1.0 - CLEAR_TOLERANCE,
+            np.ascontiguousarray(wanted),
+        )
+        band = ratio = None
+        radius_rows = np.broadcast_to(radius, valid.shape)
+
+        def score(idx):  # the ratio of the candidates idx (−1: −inf), on the rows with one
+            out = np.full(n, -np.inf)
+            sel = np.flatnonzero(idx >= 0)
+            if sel.size:
+                psi = cand[sel, idx[sel]][:, None]
+                out[sel] = cpa_min_ratio(
+                    vo[sel], r[sel], v[sel], valid[sel], psi, radius_rows[sel], lookahead_s
+                )[:, 0]
+            return out
+
+    else:
+        extra = None
+        if exact_candidates and r.shape[1] > 0:
+            extra = exact_boundary_candidates(vo, r, v, valid, radius, lookahead_s)
+        # sorted by preference: |ψ| (+ left_penalty for left turns), then right turn
+        # (ψ ≤ 0) first, then original index
+        cand, grid, _ = preferred_candidates_on_grid(mx, resolution, extra, left_penalty)
+        usable = ~np.isnan(cand)
+        safe = np.where(usable, cand, 0.0)
+        ratio0 = cpa_min_ratio(vo, r, v, valid, np.zeros((n, 1)), radius, lookahead_s)[:, 0]
         if turn_rate is None:
             ratio = cpa_min_ratio(vo, r, v, valid, safe, radius, lookahead_s)
         else:
             ratio = cpa_min_ratio_turning(vo, r, v, valid, safe, radius, lookahead_s, turn_rate)
         ratio = np.where(usable, ratio, -np.inf)
         band, first, best = bands_from_ratio(cand, ratio, usable, wanted)
-    else:
-        band = ratio = None
-        args = (
-            np.ascontiguousarray(vo),
-            np.ascontiguousarray(r),
-            np.ascontiguousarray(v),
-            np.ascontiguousarray(valid),
-            np.ascontiguousarray(safe),
-            np.ascontiguousarray(usable),
-            np.ascontiguousarray(np.broadcast_to(radius, valid.shape)),
-            float(lookahead_s),
-            origin,
-            grid,
-        )
-        first = first_clear_search(*args, 1.0 - CLEAR_TOLERANCE)
-        best = np.full((n, 2), -1, dtype=np.int64)
-        blocked = first[:, :2] < 0
-        blocked &= np.stack(
-            [(usable & (cand <= 0)).any(axis=1), (usable & (cand >= 0)).any(axis=1)], axis=1
-        )
-        blocked &= wanted
-        who, col = np.nonzero(blocked)
-        if who.size:
-            best[who, col] = best_blocked_search(*args, who.astype(np.int64), col.astype(np.int64))
-    if ratio is None:
-        score = lambda idx: np.where(  # noqa: E731
-            idx >= 0,
-            cpa_min_ratio(
-                vo, r, v, valid, safe[rows, np.maximum(idx, 0)][:, None], radius, lookahead_s
-            )[:, 0],
-            -np.inf,
-        )
-    else:
         score = lambda idx: np.where(idx >= 0, ratio[rows, np.maximum(idx, 0)], -np.inf)  # noqa: E731
+        if not (full or turn_rate is not None):
+            band = ratio = None
+    conflict = ~(ratio0 >= 1.0 - CLEAR_TOLERANCE)
     choice = band_choice(first, best, score)
     heading_change = cand[rows, choice]
     return BandResult(heading_change, conflict, cand, band, ratio, first, best)

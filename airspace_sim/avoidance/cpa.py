@@ -9,8 +9,12 @@ and intruder ``k`` flying straight, with ``r`` the relative position and
 and the *ratio* ``d / radius``. :func:`cpa_min_ratio` gives the minimum ratio over intruders
 for every (ownship, candidate); the search kernels below answer the questions a band search
 asks (the first clear candidate of each side, the best candidate of a blocked side) with the
-same arithmetic but far fewer evaluations. :func:`cpa_min_ratio_turning` judges a candidate
-as flown at a turn rate. Distances m, velocities m/s, times s, angles rad CCW positive.
+same arithmetic but far fewer evaluations, and :func:`band_rows` runs them row by row right
+after sorting the row's candidates by preference (:func:`_sort_row`, the kernel of
+:func:`~airspace_sim.avoidance.bands.preferred_candidates`): the whole fast path of
+:func:`~airspace_sim.avoidance.bands.band_search` but the boundary roots, in one pass and in
+one module (numba's on-disk cache of a kernel does not see edits of helpers in other
+modules). :func:`cpa_min_ratio_turning` judges a candidate as flown at a turn rate. Distances m, velocities m/s, times s, angles rad CCW positive.
 """
 
 from __future__ import annotations
@@ -107,17 +111,6 @@ def _pair_ratio2(vo, r, v, radius, n, k, rvx, rvy, lookahead_s):  # pragma: no c
     return max(d2, 0.0) * (1.0 / (radius[n, k] * radius[n, k]))
 
 
-@njit(inline="always", error_model="numpy")
-def _ratio_now(r, radius, n, k):  # pragma: no cover - compiled
-    """(Current distance / radius)² of ownship ``n`` and intruder ``k``, as
-    :func:`_pair_ratio2` computes it at ``t = 0``: an upper bound of :func:`_pair_ratio2`
-    for every heading, in floating point too. (With ``t > 0``, ``r·v < 0`` and
-    ``t ≤ −r·v/|v|²`` (rounded), ``t·|v|² + 2 r·v`` rounds to a negative number, so
-    ``d² ≤ r²``; rounding is monotone.)"""
-    rx, ry = r[n, k, 0], r[n, k, 1]
-    return max(rx * rx + ry * ry, 0.0) * (1.0 / (radius[n, k] * radius[n, k]))
-
-
 @njit(cache=True, error_model="numpy")
 def _cpa_kernel(vo, r, v, valid, psi, radius, lookahead_s):  # pragma: no cover - compiled
     """Fused loop over ``(n, c, k)`` of :func:`cpa_min_ratio_numpy`'s formula, same operations."""
@@ -162,133 +155,551 @@ def _turned(vo, n, p, g, cos_grid, sin_grid):  # pragma: no cover - compiled
     return cs * vo[n, 0] - sn * vo[n, 1], sn * vo[n, 0] + cs * vo[n, 1]
 
 
-@njit(cache=True, error_model="numpy")
-def first_clear_search(
-    vo, r, v, valid, psi, usable, radius, lookahead_s, origin, grid, threshold
-):  # pragma: no cover
-    """Per ownship, the first clear candidate of each side (columns of ``first_clear``).
+def clear_ratio2(threshold: float) -> float:
+    """The smallest ``x`` with ``np.sqrt(x) >= threshold``: the search kernels test a
+    squared ratio ``q2`` as ``q2 >= clear_ratio2(t)``, which is ``np.sqrt(q2) >= t`` for
+    every ``q2`` (NaN included) since the rounded square root is monotone, without a
+    square root per pair (:func:`_sqrt_threshold`)."""
+    return float(_sqrt_threshold(float(threshold)))
 
-    ``psi`` (N, C) sorted by preference; ``origin`` (N, C) its grid index or −1 (the cos
-    and sin of the ``grid`` (G,) values are computed once, not per row). Each candidate is
-    tested with the same arithmetic
-    as :func:`_cpa_kernel`, intruder by intruder, stopping at the first one closer than
-    ``threshold``; the scan of an ownship stops once every side has a clear candidate. So
-    the work is about the blocked candidates before the first clear ones, not C·K. The
-    last intruder that blocked a candidate on the same side (ψ ≤ 0 or ψ > 0) is tried
-    first: neighbouring candidates on a side are usually blocked by the same one, and the
-    preference order alternates between the sides (one blocker for both sides took 2.3
-    times the pair evaluations on the 1000-aircraft benchmark traffic). An intruder already
-    closer than ``threshold`` (:func:`_ratio_now`) blocks every heading: such a row (a
-    quarter of them there) has no clear candidate and is not scanned.
+
+@njit(cache=True, error_model="numpy")
+def _sqrt_threshold(t):  # pragma: no cover - compiled
+    """:func:`clear_ratio2` in numba: ``t²`` moved by ulps to the edge of ``sqrt(x) >= t``."""
+    if not t > 0.0:
+        return -np.inf if t <= 0.0 else np.nan  # every x ≥ 0 passes; NaN: none does
+    if t == np.inf:
+        return np.inf
+    y = t * t
+    while y > 0.0 and np.sqrt(np.nextafter(y, 0.0)) >= t:
+        y = np.nextafter(y, 0.0)
+    while not np.sqrt(y) >= t:
+        y = np.nextafter(y, np.inf)
+    return y
+
+
+@njit(inline="always", error_model="numpy")
+def _row_inverse_r2(radius, valid, n, inv_r2):  # pragma: no cover - compiled
+    """``inv_r2[k] = 1 / radius[n, k]²`` for the valid slots of row ``n`` (the factor
+    :func:`_pair_ratio2` computes per pair, once per row: the same bits)."""
+    for k in range(valid.shape[1]):
+        if valid[n, k]:
+            inv_r2[k] = 1.0 / (radius[n, k] * radius[n, k])
+
+
+@njit(inline="always", error_model="numpy")
+def _pair_q2(vo, r, v, inv_r2, n, k, rvx, rvy, lookahead_s):  # pragma: no cover - compiled
+    """:func:`_pair_ratio2` with the pair's ``1 / radius²`` from :func:`_row_inverse_r2`."""
+    rx, ry = r[n, k, 0], r[n, k, 1]
+    vx = (v[n, k, 0] + vo[n, 0]) - rvx
+    vy = (v[n, k, 1] + vo[n, 1]) - rvy
+    dot = vx * rx + vy * ry
+    v2 = vx * vx + vy * vy
+    t = -dot / max(v2, 1e-300)
+    t = min(max(t, 0.0), lookahead_s)
+    d2 = (t * v2 + 2.0 * dot) * t + (rx * rx + ry * ry)
+    return max(d2, 0.0) * inv_r2[k]
+
+
+@njit(cache=True, error_model="numpy")
+def _first_clear_row(
+    vo,
+    r,
+    v,
+    valid,
+    inv_r2,
+    clear2,
+    lookahead_s,
+    psi,
+    usable,
+    origin,
+    n_scan,
+    n,
+    cos_grid,
+    sin_grid,
+    blockers,
+    out,
+):  # pragma: no cover - compiled
+    """Row ``n``'s first clear candidate of each side into ``out`` (3,) (the columns of
+    ``first_clear``; −1: none).
+
+    ``psi``, ``usable``, ``origin`` (C,): the row's candidates sorted by preference, usable
+    (not NaN) and their grid index or −1 (the cos and sin of grid values come from the
+    tables ``cos_grid``, ``sin_grid``, not libm per row); the first ``n_scan`` are
+    scanned. Each candidate is tested with the arithmetic of :func:`_cpa_kernel`,
+    intruder by intruder, stopping at the first one whose squared ratio is below
+    ``clear2`` (:func:`clear_ratio2` of the threshold: no square root per pair;
+    ``inv_r2`` from :func:`_row_inverse_r2`); the scan stops once every side has a clear
+    candidate, so the work is about the blocked candidates before the first clear ones,
+    not C·K. The last intruder that blocked a candidate on the same side (ψ ≤ 0 or ψ > 0,
+    ``blockers`` (2,) scratch) is tried first: neighbouring candidates on a side are
+    usually blocked by the same one, and the preference order alternates between the
+    sides (one blocker for both sides took 2.3 times the pair evaluations on the
+    1000-aircraft benchmark traffic). An intruder already closer than the threshold
+    blocks every heading (for ``t > 0`` the computed ``t·|v|² + 2 r·v`` rounds negative,
+    so the computed CPA distance never exceeds the current one, in floating point too):
+    such a row has no clear candidate and is not scanned.
     """
-    n_own, n_cand = psi.shape
+    out[0] = out[1] = out[2] = -1
     n_int = valid.shape[1]
-    out = np.full((n_own, 3), -1, dtype=np.int64)
-    cos_grid, sin_grid = _grid_trig(grid)
-    blockers = np.empty(2, dtype=np.int64)  # last blocking intruder of each side
-    for n in range(n_own):
-        inside = False
-        for k in range(n_int):
-            if valid[n, k] and not (np.sqrt(_ratio_now(r, radius, n, k)) >= threshold):
-                inside = True
-                break
-        if inside:
+    for k in range(n_int):
+        if valid[n, k]:
+            rx, ry = r[n, k, 0], r[n, k, 1]
+            # the current (distance / radius)², _pair_q2 at t = 0
+            if not (max(rx * rx + ry * ry, 0.0) * inv_r2[k] >= clear2):
+                return
+    blockers[0] = blockers[1] = -1
+    for c in range(n_scan):
+        if not usable[c]:
             continue
-        blockers[0] = blockers[1] = -1
-        for c in range(n_cand):
-            if not usable[n, c]:
+        p = psi[c]
+        want = (p <= 0.0 and out[0] < 0) or (p >= 0.0 and out[1] < 0) or (p < 0.0 and out[2] < 0)
+        if not want:
+            if out[0] >= 0 and out[1] >= 0 and out[2] >= 0:
+                break
+            continue
+        rvx, rvy = _turned(vo, n, p, origin[c], cos_grid, sin_grid)
+        clear = True
+        sd = 0 if p <= 0.0 else 1
+        blocker = blockers[sd]
+        for j in range(-1, n_int):
+            k = blocker if j < 0 else j
+            if k < 0 or (j >= 0 and k == blocker) or not valid[n, k]:
                 continue
-            p = psi[n, c]
-            want = (
-                (p <= 0.0 and out[n, 0] < 0)
-                or (p >= 0.0 and out[n, 1] < 0)
-                or (p < 0.0 and out[n, 2] < 0)
-            )
-            if not want:
-                if out[n, 0] >= 0 and out[n, 1] >= 0 and out[n, 2] >= 0:
-                    break
-                continue
-            rvx, rvy = _turned(vo, n, p, origin[n, c], cos_grid, sin_grid)
-            clear = True
-            sd = 0 if p <= 0.0 else 1
-            blocker = blockers[sd]
-            for j in range(-1, n_int):
-                k = blocker if j < 0 else j
-                if k < 0 or (j >= 0 and k == blocker) or not valid[n, k]:
-                    continue
-                ratio2 = _pair_ratio2(vo, r, v, radius, n, k, rvx, rvy, lookahead_s)
-                if not (np.sqrt(ratio2) >= threshold):
-                    clear = False
-                    blockers[sd] = k
-                    break
-            if clear:
-                if p <= 0.0 and out[n, 0] < 0:
-                    out[n, 0] = c
-                if p >= 0.0 and out[n, 1] < 0:
-                    out[n, 1] = c
-                if p < 0.0 and out[n, 2] < 0:
-                    out[n, 2] = c
-    return out
+            if not (_pair_q2(vo, r, v, inv_r2, n, k, rvx, rvy, lookahead_s) >= clear2):
+                clear = False
+                blockers[sd] = k
+                break
+        if clear:
+            if p <= 0.0 and out[0] < 0:
+                out[0] = c
+            if p >= 0.0 and out[1] < 0:
+                out[1] = c
+            if p < 0.0 and out[2] < 0:
+                out[2] = c
 
 
 @njit(cache=True, error_model="numpy")
-def best_blocked_search(
-    vo, r, v, valid, psi, usable, radius, lookahead_s, origin, grid, rows, side
-):  # pragma: no cover
-    """For ownship ``rows[i]``, the candidate on side ``side[i]`` (0: ψ ≤ 0, 1: ψ ≥ 0) of
-    largest minimum CPA ratio (the first in order among equals): a max-min search that
-    stops evaluating a candidate once its running minimum cannot beat the best so far.
+def _best_blocked_row(
+    vo,
+    r,
+    v,
+    valid,
+    inv_r2,
+    lookahead_s,
+    psi,
+    usable,
+    origin,
+    n_scan,
+    n,
+    side,
+    cos_grid,
+    sin_grid,
+):  # pragma: no cover - compiled
+    """Index of row ``n``'s candidate on ``side`` (0: ψ ≤ 0, 1: ψ ≥ 0) of largest minimum
+    CPA ratio (the first in order among equals), −1 if the side has none; candidates as
+    in :func:`_first_clear_row`. A max-min search that stops evaluating a candidate once
+    its running minimum cannot beat the best so far.
 
     Each candidate first tries the intruder that ended (or minimised) the previous
     candidate's evaluation: neighbouring candidates are mostly stopped by the same one
     (on dense traffic this halves the pair evaluations against trying the best
     candidate's minimiser). The minimum is kept squared and its square root taken only
     when it falls (``sqrt`` is monotone: the same minimum bits). No candidate's minimum
-    exceeds the smallest current distance ratio (:func:`_ratio_now`): the scan stops once
-    the best reaches it. ``origin``, ``grid`` as in :func:`first_clear_search`. Same
-    arithmetic as :func:`_cpa_kernel`, so the same choice as the full evaluation.
+    exceeds the smallest current distance ratio (see :func:`_first_clear_row`): the scan
+    stops once the best reaches it. Same arithmetic as :func:`_cpa_kernel`, so the same
+    choice as the full evaluation.
     """
     n_int = valid.shape[1]
-    n_cand = psi.shape[1]
-    out = np.full(rows.size, -1, dtype=np.int64)
+    res = -1
+    best = -np.inf
+    guess = -1
+    top2 = np.inf  # the smallest current (distance / radius)²
+    for k in range(n_int):
+        if valid[n, k]:
+            rx, ry = r[n, k, 0], r[n, k, 1]
+            top2 = min(top2, max(rx * rx + ry * ry, 0.0) * inv_r2[k])
+    top = np.sqrt(top2)
+    for c in range(n_scan):
+        if best >= top:
+            break
+        if not usable[c]:
+            continue
+        p = psi[c]
+        if (side == 0 and p > 0.0) or (side == 1 and p < 0.0):
+            continue
+        rvx, rvy = _turned(vo, n, p, origin[c], cos_grid, sin_grid)
+        m2 = np.inf
+        m = np.inf
+        arg = -1
+        for j in range(-1, n_int):
+            k = guess if j < 0 else j
+            if k < 0 or (j >= 0 and k == guess) or not valid[n, k]:
+                continue
+            q2 = _pair_q2(vo, r, v, inv_r2, n, k, rvx, rvy, lookahead_s)
+            if q2 < m2:
+                m2 = q2
+                m = np.sqrt(q2)
+                arg = k
+                if m <= best:
+                    break
+        if m > best:
+            best = m
+            res = c
+        guess = arg
+    return res
+
+
+@njit(cache=True, error_model="numpy")
+def _grid_order(grid, left_penalty):  # pragma: no cover - compiled
+    """The whole grid (G,) (increasing) in preference order, as four (G,) arrays: value,
+    key ``mag = |ψ| (+ left_penalty)``, ``ψ > 0``, grid index. Its right turns by
+    decreasing index merged with its left turns by increasing index."""
+    n_grid = grid.size
+    split = 0  # grid[:split] ≤ 0 (right turns or ahead), grid[split:] > 0
+    while split < n_grid and not grid[split] > 0.0:
+        split += 1
+    rv, rm, rl, ri = (
+        np.empty(n_grid),
+        np.empty(n_grid),
+        np.empty(n_grid, np.bool_),
+        np.empty(n_grid, np.int64),
+    )
+    lv, lm, ll, li = rv.copy(), rm.copy(), rl.copy(), ri.copy()
+    ov, om, ol, oi = rv.copy(), rm.copy(), rl.copy(), ri.copy()
+    nr = 0
+    for j in range(split - 1, -1, -1):
+        rv[nr], rm[nr], rl[nr], ri[nr] = grid[j], abs(grid[j]), False, j
+        nr += 1
+    nl = 0
+    for j in range(split, n_grid):
+        lv[nl], lm[nl], ll[nl], li[nl] = grid[j], abs(grid[j]) + left_penalty, True, j
+        nl += 1
+    i = j = o = 0
+    while i < nr or j < nl:
+        if j >= nl or (i < nr and _key_less(rm[i], rl[i], ri[i], lm[j], ll[j], li[j])):
+            ov[o], om[o], ol[o], oi[o] = rv[i], rm[i], rl[i], ri[i]
+            i += 1
+        else:
+            ov[o], om[o], ol[o], oi[o] = lv[j], lm[j], ll[j], li[j]
+            j += 1
+        o += 1
+    return ov, om, ol, oi
+
+
+@njit(inline="always")
+def _key_less(am, al, ai, bm, bl, bi):  # pragma: no cover - compiled
+    """The sort key ``(mag, ψ > 0, index)`` of ``a`` below that of ``b``."""
+    return am < bm or (am == bm and (al < bl or (al == bl and ai < bi)))
+
+
+@njit(cache=True, error_model="numpy")
+def _grid_inside(lim, all_v, all_m, all_l, all_i, fv, fm, fl, fi):  # pragma: no cover
+    """The grid entries with ``|ψ| ≤ lim``, in the grid's preference order
+    (:func:`_grid_order`'s arrays), into ``fv``, ``fm``, ``fl``, ``fi``; returns their
+    number. Rows of one limit share them (the callers keep the last limit's)."""
+    nf = 0
+    for q in range(all_v.size):
+        if abs(all_v[q]) <= lim:
+            fv[nf], fm[nf], fl[nf], fi[nf] = all_v[q], all_m[q], all_l[q], all_i[q]
+            nf += 1
+    return nf
+
+
+@njit(inline="always")
+def _row_limit(mx_n):  # pragma: no cover - compiled
+    """The limit ``|ψ| ≤`` this of a row's candidates (:func:`candidate_grid`'s test)."""
+    return mx_n * (1 + 1e-12) + 1e-15
+
+
+@njit(cache=True, error_model="numpy")
+def _sort_row(
+    mx_n,
+    extra_row,
+    n_used,
+    left_penalty,
+    fv,
+    fm,
+    fl,
+    fi,
+    nf,
+    n_grid,
+    out,
+    origin,
+    usable,
+    xv,
+    xm,
+    xl,
+    xi,
+    perm,
+    tail,
+    nt,
+):  # pragma: no cover - compiled
+    """One row of :func:`_preferred_kernel` into ``out`` (C,), with ``origin`` (C,) (grid
+    index or −1) and ``usable`` (C,) (not NaN). ``fv``, ``fm``, ``fl``, ``fi``: the first
+    ``nf`` of them the entries of the ``n_grid`` grid inside the row's limit, in
+    preference order (:func:`_grid_inside`); the other arrays are scratch. Only the
+    first ``n_used`` extras are read, the others taken as NaN (the boundary roots packed
+    by :func:`~airspace_sim.avoidance.heading.boundary_roots_in_window`). Returns the
+    number of leading entries that hold every usable one."""
+    n_extra = extra_row.size
+    lim = _row_limit(mx_n)
+    # the limits and extras of finite mag (inside the limit) to sort; the others into the
+    # tail lists in listing order: (inf, right) — NaN ranks as mag = inf, right — (inf,
+    # left), then the grid's NaN and NaN mag (a NaN left_penalty). An extra's roots are
+    # finite, so its entries of the first list are all NaN: the unread ones go last.
+    nx = 0
+    nt[:] = 0
+    for j in range(n_grid, n_grid + 2 + n_used):
+        if j == n_grid:
+            c = -mx_n
+        elif j == n_grid + 1:
+            c = mx_n
+        else:
+            c = extra_row[j - n_grid - 2]
+        if not (abs(c) <= lim):
+            c = np.nan
+        left = c > 0.0
+        g = np.inf if np.isnan(c) else abs(c) + (left_penalty if left else 0.0)
+        if g < np.inf:
+            xv[nx], xm[nx], xl[nx], xi[nx] = c, g, left, j
+            nx += 1
+        else:
+            q = (0 if g == np.inf else 2) + (1 if left else 0)
+            tail[q, nt[q]] = c
+            nt[q] += 1
+    for _ in range(n_extra - n_used):
+        tail[0, nt[0]] = np.nan
+        nt[0] += 1
+    # insertion sort of an index permutation by the whole key (a few dozen entries)
+    for i in range(nx):
+        perm[i] = i
+    for i in range(1, nx):
+        p = perm[i]
+        g, lf, ix = xm[p], xl[p], xi[p]
+        k = i - 1
+        while k >= 0:
+            q = perm[k]
+            if _key_less(xm[q], xl[q], xi[q], g, lf, ix):
+                break
+            perm[k + 1] = q
+            k -= 1
+        perm[k + 1] = p
+    # merge the grid's entries inside the limit (in the grid's order) with them
+    q = i = o = 0
+    while q < nf or i < nx:
+        if i >= nx or (
+            q < nf and _key_less(fm[q], fl[q], fi[q], xm[perm[i]], xl[perm[i]], xi[perm[i]])
+        ):
+            out[o], origin[o] = fv[q], fi[q]
+            q += 1
+        else:
+            out[o], origin[o] = xv[perm[i]], -1
+            i += 1
+        usable[o] = True
+        o += 1
+    n_scan = o
+    for t in range(4):
+        if t == 2:
+            for _ in range(n_grid - nf):
+                out[o], origin[o], usable[o] = np.nan, -1, False
+                o += 1
+        for e in range(nt[t]):
+            c = tail[t, e]
+            out[o], origin[o], usable[o] = c, -1, not np.isnan(c)
+            o += 1
+            if usable[o - 1]:
+                n_scan = o
+    return n_scan
+
+
+@njit(cache=True, error_model="numpy")
+def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - compiled
+    """Rows of ``[grid (G,), −mx[n], mx[n], extra[n] (E,)]`` (NaN outside ``±mx[n]``), sorted.
+
+    The order is the lexsort key ``(mag, ψ > 0, index)``, ``mag = |ψ| (+ left_penalty)``.
+    The entries of finite ``mag`` form two runs already sorted by that key — the grid's
+    (its order computed once for the whole grid, ``grid`` increasing, :func:`_grid_order`;
+    a row keeps the entries inside its limit in that order) and the limits and extras
+    after an insertion sort by the whole key (a few dozen per row; of an index
+    permutation, one move per shift) — which are merged (:func:`_sort_row`). The ``inf``
+    and then NaN ``mag`` entries follow in the listing order, which is where the lexsort
+    puts them (every NaN here is the same ``np.nan``). Returns the sorted rows (n_own, C)
+    and the grid index of each entry (−1: not from the grid).
+    """
+    n_own, n_extra = extra.shape
+    n_cand = grid.size + 2 + n_extra
+    out = np.empty((n_own, n_cand))
+    origin = np.empty((n_own, n_cand), dtype=np.int64)
+    all_v, all_m, all_l, all_i = _grid_order(grid, left_penalty)
+    usable = np.empty(n_cand, np.bool_)
+    xv, xm, xl, xi = (
+        np.empty(n_cand),
+        np.empty(n_cand),
+        np.empty(n_cand, np.bool_),
+        np.empty(n_cand, np.int64),
+    )
+    perm = np.empty(n_cand, np.int64)
+    tail = np.empty((4, n_cand))
+    nt = np.zeros(4, np.int64)
+    fv, fm, fl, fi = all_v.copy(), all_m.copy(), all_l.copy(), all_i.copy()
+    nf, last = -1, np.nan
+    for n in range(n_own):
+        lim = _row_limit(mx[n])
+        if nf < 0 or not lim == last:
+            nf, last = _grid_inside(lim, all_v, all_m, all_l, all_i, fv, fm, fl, fi), lim
+        _sort_row(
+            mx[n],
+            extra[n],
+            n_extra,
+            left_penalty,
+            fv,
+            fm,
+            fl,
+            fi,
+            nf,
+            grid.size,
+            out[n],
+            origin[n],
+            usable,
+            xv,
+            xm,
+            xl,
+            xi,
+            perm,
+            tail,
+            nt,
+        )
+    return out, origin
+
+
+@njit(cache=True, error_model="numpy")
+def band_rows(
+    vo,
+    r,
+    v,
+    valid,
+    radius,
+    lookahead_s,
+    mx,
+    extra,
+    n_extra,
+    grid,
+    left_penalty,
+    threshold,
+    wanted,
+):  # pragma: no cover - compiled
+    """:func:`~airspace_sim.avoidance.bands.band_search`'s fast path (``full=False``) row
+    by row in one pass: the ratio at ψ = 0 (as :func:`_cpa_kernel`), the row's candidates
+    sorted (:func:`_sort_row`, as :func:`_preferred_kernel`), its first clear candidates
+    (:func:`_first_clear_row`, clear: ratio ≥ ``threshold``) and, on the sides ``wanted``
+    (N, 2) that have none, the best blocked one (:func:`_best_blocked_row`). ``vo`` (N, 2)
+    m/s, ``r``, ``v`` (N, K, 2) m and m/s, ``valid`` (N, K), ``lookahead_s`` s, ``mx``
+    (N,) rad, ``grid`` (G,) rad increasing; other arguments as there (``radius`` (N, K); ``extra`` (N, E) the boundary roots, of which
+    row ``n`` uses the first ``n_extra[n]``, the others NaN).
+
+    Returns ``(candidates (N, C), first_clear (N, 3), best_blocked (N, 2), ratio0 (N,))``,
+    the arrays of those functions, without the (N, C) origin and usable arrays between
+    them and with each row's sorted candidates still in cache when they are searched.
+    """
+    n_own, n_int = valid.shape
+    n_cand = grid.size + 2 + extra.shape[1]
+    cand = np.empty((n_own, n_cand))
+    first = np.full((n_own, 3), -1, dtype=np.int64)
+    best = np.full((n_own, 2), -1, dtype=np.int64)
+    ratio0 = np.empty(n_own)
+    all_v, all_m, all_l, all_i = _grid_order(grid, left_penalty)
     cos_grid, sin_grid = _grid_trig(grid)
-    for i in range(rows.size):
-        n = rows[i]
-        best = -np.inf
-        guess = -1
-        top2 = np.inf  # the smallest current (distance / radius)²
+    clear2 = _sqrt_threshold(threshold)
+    origin = np.empty(n_cand, np.int64)
+    usable = np.empty(n_cand, np.bool_)
+    xv, xm, xl, xi = (
+        np.empty(n_cand),
+        np.empty(n_cand),
+        np.empty(n_cand, np.bool_),
+        np.empty(n_cand, np.int64),
+    )
+    perm = np.empty(n_cand, np.int64)
+    tail = np.empty((4, n_cand))
+    nt = np.zeros(4, np.int64)
+    blockers = np.empty(2, dtype=np.int64)
+    inv_r2 = np.empty(n_int)
+    cs, sn = np.cos(0.0), np.sin(0.0)
+    fv, fm, fl, fi = all_v.copy(), all_m.copy(), all_l.copy(), all_i.copy()
+    nf, last = -1, np.nan
+    for n in range(n_own):
+        # _cpa_kernel at ψ = 0, its operations in its order
+        rvx = cs * vo[n, 0] - sn * vo[n, 1]
+        rvy = sn * vo[n, 0] + cs * vo[n, 1]
+        b = np.inf
         for k in range(n_int):
             if valid[n, k]:
-                top2 = min(top2, _ratio_now(r, radius, n, k))
-        top = np.sqrt(top2)
-        for c in range(n_cand):
-            if best >= top:
-                break
-            if not usable[n, c]:
-                continue
-            p = psi[n, c]
-            if (side[i] == 0 and p > 0.0) or (side[i] == 1 and p < 0.0):
-                continue
-            rvx, rvy = _turned(vo, n, p, origin[n, c], cos_grid, sin_grid)
-            m2 = np.inf
-            m = np.inf
-            arg = -1
-            for j in range(-1, n_int):
-                k = guess if j < 0 else j
-                if k < 0 or (j >= 0 and k == guess) or not valid[n, k]:
-                    continue
-                q2 = _pair_ratio2(vo, r, v, radius, n, k, rvx, rvy, lookahead_s)
-                if q2 < m2:
-                    m2 = q2
-                    m = np.sqrt(q2)
-                    arg = k
-                    if m <= best:
-                        break
-            if m > best:
-                best = m
-                out[i] = c
-            guess = arg
-    return out
+                b = min(b, _pair_ratio2(vo, r, v, radius, n, k, rvx, rvy, lookahead_s))
+        ratio0[n] = np.sqrt(b)
+        _row_inverse_r2(radius, valid, n, inv_r2)
+        lim = _row_limit(mx[n])
+        if nf < 0 or not lim == last:
+            nf, last = _grid_inside(lim, all_v, all_m, all_l, all_i, fv, fm, fl, fi), lim
+        n_scan = _sort_row(
+            mx[n],
+            extra[n],
+            n_extra[n],
+            left_penalty,
+            fv,
+            fm,
+            fl,
+            fi,
+            nf,
+            grid.size,
+            cand[n],
+            origin,
+            usable,
+            xv,
+            xm,
+            xl,
+            xi,
+            perm,
+            tail,
+            nt,
+        )
+        row = cand[n]
+        _first_clear_row(
+            vo,
+            r,
+            v,
+            valid,
+            inv_r2,
+            clear2,
+            lookahead_s,
+            row,
+            usable,
+            origin,
+            n_scan,
+            n,
+            cos_grid,
+            sin_grid,
+            blockers,
+            first[n],
+        )
+        for col in range(2):
+            if first[n, col] < 0 and wanted[n, col]:
+                best[n, col] = _best_blocked_row(
+                    vo,
+                    r,
+                    v,
+                    valid,
+                    inv_r2,
+                    lookahead_s,
+                    row,
+                    usable,
+                    origin,
+                    n_scan,
+                    n,
+                    col,
+                    cos_grid,
+                    sin_grid,
+                )
+    return cand, first, best, ratio0
 
 
 #: Largest heading change, rad, flown along one straight chord when the turn is modelled

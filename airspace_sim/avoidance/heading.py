@@ -167,10 +167,23 @@ def _smallest(roots):
 @njit(cache=True, error_model="numpy")
 def _wrap(x):  # pragma: no cover - compiled
     """:func:`~airspace_sim.geometry.wrap_angle` of a scalar, rad: ``(x + π) % 2π − π`` with
-    numpy's float remainder (``fmod``, then the divisor's sign), so the same bits."""
-    m = np.fmod(x + np.pi, 2.0 * np.pi)
+    numpy's float remainder (``fmod``, then the divisor's sign), so the same bits. For
+    ``|x + π| < 4π`` (every root here) ``fmod`` is ``y``, ``y − 2π`` or ``y + 2π``, each
+    exact (Sterbenz), so it is taken without the libm call."""
+    y = x + np.pi
+    two_pi = 2.0 * np.pi
+    if 0.0 <= y < two_pi:
+        m = y
+    elif two_pi <= y < 2.0 * two_pi:
+        m = y - two_pi
+    elif -two_pi < y < 0.0:
+        m = y
+    elif -2.0 * two_pi < y <= -two_pi:
+        m = y + two_pi
+    else:
+        m = np.fmod(y, two_pi)
     if m < 0.0:
-        m += 2.0 * np.pi
+        m += two_pi
     elif m == 0.0:
         m = 0.0  # numpy gives +0 (the divisor's sign), fmod may give −0
     return m - np.pi
@@ -211,6 +224,132 @@ def _on_tangent_ray(psi, cos_psi, sin_psi, vox, voy, vix, viy, ux, uy, scale):  
     return _sum2(wx * ux, wy * uy) > threshold
 
 
+#: guard band of the search-window test, on the cosine of a root (see :func:`_pair_roots`);
+#: far above the angle-sum cos's error bound (≈ 2e-8)
+_WINDOW_GUARD = 1e-6
+
+
+@njit(inline="always", error_model="numpy")
+def _window_cos(limit):  # pragma: no cover - compiled
+    """``cos(limit)`` for :func:`_pair_roots`'s window test; −inf (no test) unless
+    ``limit < π`` (``|ψ| ≤ limit`` is ``cos ψ ≥ cos limit`` for ``ψ`` in ``[−π, π)`` only
+    then)."""
+    return np.cos(limit) if limit < np.pi else -np.inf
+
+
+@njit(inline="always", error_model="numpy")
+def _may_have_roots(a, b, c, cos_min):  # pragma: no cover - compiled
+    """False only where ``a cos ψ + b sin ψ = c`` certainly has no root (``c² > (a² + b²)
+    (1 + 10⁻⁹)``), or where both roots certainly lie outside the window (their cosines
+    below ``cos_min``, from ``amp = √(a² + b²)`` within a few ulp of ``hypot``, on roots
+    well apart): both without libm's ``hypot``. Elsewhere, and when ``a² + b²`` is so
+    large or small that it could have overflowed or underflowed, True (decide exactly)."""
+    amp2 = a * a + b * b
+    if not (1e-280 < amp2 < 1e280):
+        return True
+    c2 = c * c
+    if c2 > amp2 * (1.0 + 1e-9):
+        return False
+    if cos_min > -np.inf and c2 < amp2 * (1.0 - 1e-9):
+        amp = np.sqrt(amp2)
+        cphi, sphi, ch = a / amp, b / amp, c / amp
+        sh = np.sqrt(max(1.0 - ch * ch, 0.0))
+        if cphi * ch + sphi * sh < cos_min and cphi * ch - sphi * sh < cos_min:
+            return False
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def _pair_roots(
+    vox, voy, sv, vv, bx, by, vix, viy, rad, lookahead_s, cos_lim, out
+):  # pragma: no cover
+    """The six boundary roots of one (ownship, intruder) pair into ``out`` (6,) (NaN where
+    none), as :func:`boundary_heading_changes` documents; ``sv = |v_o|``, ``vv = v_o·v_o``.
+
+    A root whose cosine, from the angle-sum formula (``cos φ = a/amp``, ``cos h = c/amp``,
+    ``sin h = √(1 − cos²h)``, error ≲ 2·10⁻⁸), is below ``cos_lim`` − :data:`_WINDOW_GUARD`
+    lies outside ``|ψ| ≤ limit`` (:func:`_window_cos`) and is left NaN without its
+    ``atan2``, ``acos`` and wrap: the candidate sort drops such roots anyway. Equations
+    with certainly no root, or both roots outside, skip ``hypot`` too
+    (:func:`_may_have_roots`). A root inside the window, or near its edge, is computed as
+    the numpy reference computes it.
+    """
+    out[:] = np.nan
+    # tangent_direction: line of sight rotated by ±β
+    dist = np.hypot(bx, by)
+    ratio = rad / (dist if dist > 0 else 1.0) if dist > rad else 1.0
+    beta = np.arcsin(min(max(ratio, 0.0), 1.0))
+    if dist > 0:
+        lx, ly = -bx / dist, -by / dist
+    else:
+        lx, ly = -1.0, 0.0
+    scale = -1.0  # sv + |v_i|, for the ray test: computed when a root needs it
+    cos_min = cos_lim - _WINDOW_GUARD
+    cb, sb = np.cos(beta), np.sin(beta)
+    for s in range(2):
+        cs, sn = cb, (sb if s == 1 else -sb)  # cos, sin of ang = (2s − 1)·β
+        ux = cs * lx - sn * ly
+        uy = sn * lx + cs * ly
+        nx, ny = -uy, ux
+        a = _sum2(nx * vox, ny * voy)
+        b = _sum2(nx * -voy, ny * vox)
+        c = _sum2(nx * vix, ny * viy)
+        if not _may_have_roots(a, b, c, cos_min):
+            continue
+        # scalar _solve_cos_sin (no atan2 without a root); amp once for both uses
+        amp = np.hypot(a, b)
+        if not (abs(c / amp) <= 1.0):
+            continue
+        # roots φ ∓ h: cos φ = a/amp, sin φ = b/amp, cos h = c/amp, sin h ≥ 0
+        cphi, sphi = a / amp, b / amp
+        ch = min(max(c / amp, -1.0), 1.0)
+        sh = np.sqrt(max(1.0 - ch * ch, 0.0))
+        cos_m, sin_m = cphi * ch + sphi * sh, sphi * ch - cphi * sh  # root φ − h
+        cos_p, sin_p = cphi * ch - sphi * sh, sphi * ch + cphi * sh  # root φ + h
+        in_m, in_p = not (cos_m < cos_min), not (cos_p < cos_min)
+        if not (in_m or in_p):
+            continue
+        phi = np.arctan2(b, a)
+        half = np.arccos(min(max(c / amp, -1.0), 1.0))
+        if scale < 0.0:
+            scale = sv + np.hypot(vix, viy)
+        # λ > 0: the tangent ray
+        if in_m:
+            root = _wrap(phi - half)
+            if _on_tangent_ray(root, cos_m, sin_m, vox, voy, vix, viy, ux, uy, scale):
+                out[2 * s] = root
+        if in_p:
+            root = _wrap(phi + half)
+            if _on_tangent_ray(root, cos_p, sin_p, vox, voy, vix, viy, ux, uy, scale):
+                out[2 * s + 1] = root
+    # range_at_time_heading_changes at t = T
+    t = lookahead_s
+    px, py = bx + t * vix, by + t * viy
+    a = _sum2(px * vox, py * voy)
+    b = _sum2(px * -voy, py * vox)
+    c = (_sum2(px * px, py * py) + t * t * vv - rad * rad) / (2.0 * t)
+    if not _may_have_roots(a, b, c, cos_min):
+        return
+    amp = np.hypot(a, b)
+    if not (abs(c / amp) <= 1.0):
+        return
+    in_m = in_p = True
+    if cos_lim > -np.inf:
+        cphi, sphi = a / amp, b / amp
+        ch = min(max(c / amp, -1.0), 1.0)
+        sh = np.sqrt(max(1.0 - ch * ch, 0.0))
+        in_m = not (cphi * ch + sphi * sh < cos_min)
+        in_p = not (cphi * ch - sphi * sh < cos_min)
+        if not (in_m or in_p):
+            return
+    phi = np.arctan2(b, a)
+    half = np.arccos(min(max(c / amp, -1.0), 1.0))
+    if in_m:
+        out[4] = _wrap(phi - half)
+    if in_p:
+        out[5] = _wrap(phi + half)
+
+
 @njit(cache=True, error_model="numpy")
 def boundary_heading_changes(vo, r, vi, valid, radius, lookahead_s):  # pragma: no cover
     """Per (ownship, intruder) pair the six boundary roots, ``(N, K, 6)`` rad, NaN if none.
@@ -221,10 +360,11 @@ def boundary_heading_changes(vo, r, vi, valid, radius, lookahead_s):  # pragma: 
     :func:`tangent_heading_changes` with ``side = −1``, the two with ``side = +1``, the two
     of :func:`range_at_time_heading_changes` at ``t = T``.
     One fused loop with the numpy functions' operations in their order (they are the
-    reference), so the same numbers up to the last bit of the transcendental functions.
-    The tangent roots' ray test takes their cos and sin from the angle-sum formula
-    (:func:`_on_tangent_ray`, the same decisions); the two tangent directions share
-    ``cos β`` and ``sin β`` (libm's cos is even and its sin odd, bit for bit).
+    reference), so the same numbers up to the last bit of the transcendental functions
+    (:func:`_pair_roots`). The tangent roots' ray test takes their cos and sin from the
+    angle-sum formula (:func:`_on_tangent_ray`, the same decisions); the two tangent
+    directions share ``cos β`` and ``sin β`` (libm's cos is even and its sin odd, bit for
+    bit).
     """
     n_own, n_int = valid.shape
     out = np.full((n_own, n_int, 6), np.nan)
@@ -233,61 +373,61 @@ def boundary_heading_changes(vo, r, vi, valid, radius, lookahead_s):  # pragma: 
         sv = np.hypot(vox, voy)
         vv = _sum2(vox * vox, voy * voy)
         for k in range(n_int):
+            if valid[n, k]:
+                _pair_roots(
+                    vox,
+                    voy,
+                    sv,
+                    vv,
+                    r[n, k, 0],
+                    r[n, k, 1],
+                    vi[n, k, 0],
+                    vi[n, k, 1],
+                    radius[n, k],
+                    lookahead_s,
+                    -np.inf,
+                    out[n, k],
+                )
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def boundary_roots_in_window(vo, r, vi, valid, radius, lookahead_s, limit):  # pragma: no cover
+    """The roots of :func:`boundary_heading_changes` that may lie in ``|ψ| ≤ limit[n]``,
+    packed: ``(roots (N, 6K), count (N,))``, row ``n``'s ``count[n]`` roots first, in
+    the order of that kernel's (K, 6) row, then NaN. Every root with ``|ψ| ≤ limit[n]``
+    is there, with the same bits; the others left out are outside (the window test of
+    :func:`_pair_roots`). ``limit`` (N,) rad; other arguments as there."""
+    n_own, n_int = valid.shape
+    out = np.full((n_own, 6 * n_int), np.nan)
+    count = np.zeros(n_own, dtype=np.int64)
+    six = np.empty(6)
+    for n in range(n_own):
+        vox, voy = vo[n, 0], vo[n, 1]
+        sv = np.hypot(vox, voy)
+        vv = _sum2(vox * vox, voy * voy)
+        cos_lim = _window_cos(limit[n])
+        m = 0
+        for k in range(n_int):
             if not valid[n, k]:
                 continue
-            bx, by = r[n, k, 0], r[n, k, 1]
-            vix, viy = vi[n, k, 0], vi[n, k, 1]
-            rad = radius[n, k]
-            # tangent_direction: line of sight rotated by ±β
-            dist = np.hypot(bx, by)
-            ratio = rad / (dist if dist > 0 else 1.0) if dist > rad else 1.0
-            beta = np.arcsin(min(max(ratio, 0.0), 1.0))
-            if dist > 0:
-                lx, ly = -bx / dist, -by / dist
-            else:
-                lx, ly = -1.0, 0.0
-            scale = -1.0  # sv + |v_i|, for the ray test: computed when a root needs it
-            cb, sb = np.cos(beta), np.sin(beta)
-            for s in range(2):
-                cs, sn = cb, (sb if s == 1 else -sb)  # cos, sin of ang = (2s − 1)·β
-                ux = cs * lx - sn * ly
-                uy = sn * lx + cs * ly
-                nx, ny = -uy, ux
-                a = _sum2(nx * vox, ny * voy)
-                b = _sum2(nx * -voy, ny * vox)
-                c = _sum2(nx * vix, ny * viy)
-                # scalar _solve_cos_sin (no atan2 without a root); amp once for both uses
-                amp = np.hypot(a, b)
-                if not (abs(c / amp) <= 1.0):
-                    continue
-                phi = np.arctan2(b, a)
-                half = np.arccos(min(max(c / amp, -1.0), 1.0))
-                roots = (_wrap(phi - half), _wrap(phi + half))
-                # roots φ ∓ h: cos φ = a/amp, sin φ = b/amp, cos h = c/amp, sin h ≥ 0
-                cphi, sphi = a / amp, b / amp
-                ch = min(max(c / amp, -1.0), 1.0)
-                sh = np.sqrt(max(1.0 - ch * ch, 0.0))
-                if scale < 0.0:
-                    scale = sv + np.hypot(vix, viy)
-                for j in range(2):
-                    sg = -1.0 if j == 0 else 1.0
-                    cos_psi = cphi * ch - sg * sphi * sh
-                    sin_psi = sphi * ch + sg * cphi * sh
-                    # λ > 0: the tangent ray
-                    if _on_tangent_ray(
-                        roots[j], cos_psi, sin_psi, vox, voy, vix, viy, ux, uy, scale
-                    ):
-                        out[n, k, 2 * s + j] = roots[j]
-            # range_at_time_heading_changes at t = T
-            t = lookahead_s
-            px, py = bx + t * vix, by + t * viy
-            a = _sum2(px * vox, py * voy)
-            b = _sum2(px * -voy, py * vox)
-            c = (_sum2(px * px, py * py) + t * t * vv - rad * rad) / (2.0 * t)
-            amp = np.hypot(a, b)
-            if not (abs(c / amp) <= 1.0):
-                continue
-            phi = np.arctan2(b, a)
-            half = np.arccos(min(max(c / amp, -1.0), 1.0))
-            out[n, k, 4], out[n, k, 5] = _wrap(phi - half), _wrap(phi + half)
-    return out
+            _pair_roots(
+                vox,
+                voy,
+                sv,
+                vv,
+                r[n, k, 0],
+                r[n, k, 1],
+                vi[n, k, 0],
+                vi[n, k, 1],
+                radius[n, k],
+                lookahead_s,
+                cos_lim,
+                six,
+            )
+            for j in range(6):
+                if not np.isnan(six[j]):
+                    out[n, m] = six[j]
+                    m += 1
+        count[n] = m
+    return out, count
