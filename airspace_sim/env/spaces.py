@@ -408,11 +408,28 @@ def encode_own_rows(
 
 
 def finish_in_place(layout: ObservationLayout, obs: np.ndarray) -> np.ndarray:
-    """:func:`finish` of a float64 buffer (..., size) that already holds both blocks:
-    NaN -> 0 and clipped in place; float32 (..., size)."""
-    obs[np.isnan(obs)] = 0.0
+    """:func:`finish` of a float64 buffer (A, size) that already holds both blocks:
+    NaN -> 0 and clipped into the bounds in one pass (:func:`_finish_rows`); float32
+    (A, size). ``obs`` is left as it was."""
     low, high = layout.bounds()
-    return np.clip(obs, low, high, out=obs).astype(np.float32)
+    out = np.empty(obs.shape, dtype=np.float32)
+    _finish_rows(obs, low, high, out)
+    return out
+
+
+@njit(cache=True)
+def _finish_rows(obs, low, high, out):  # pragma: no cover - compiled
+    """``out`` (A, F) float32 ← ``obs`` (A, F) with NaN -> 0, clipped to ``low``, ``high``
+    (F,) float32 as numpy's ``clip`` with array bounds does (``x > low ? x : low``, then
+    ``y < high ? y : high``: the same signed zeros), then rounded to float32."""
+    for r in range(obs.shape[0]):
+        for c in range(obs.shape[1]):
+            x = obs[r, c]
+            if x != x:
+                x = 0.0
+            lo, hi = np.float64(low[c]), np.float64(high[c])
+            x = x if x > lo else lo
+            out[r, c] = x if x < hi else hi
 
 
 def finish(layout: ObservationLayout, own: np.ndarray, intruders: np.ndarray) -> np.ndarray:

@@ -11,9 +11,11 @@ index it. All angles radians CCW from east, distances metres, times seconds.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from airspace_sim.dynamics.markov import mode_cdf, next_modes
 from airspace_sim.dynamics.presets import Preset
@@ -62,6 +64,7 @@ class _Legs:
     length: np.ndarray  #: (k,) m
     hold: np.ndarray  #: (k,) bool, no waypoint ahead: hold the initial heading
     ahead: np.ndarray  #: (k,) bool, a waypoint ahead
+    tail: np.ndarray  #: (k,) m, route length from the target waypoint to the last one
 
 
 @register("autopilot", "straight")
@@ -157,6 +160,7 @@ class RouteAutopilot(Autopilot):
                 np.hypot(leg[:, 0], leg[:, 1]),
                 (self.count == 0) | self.done,
                 (self.count > 0) & ~self.done,
+                self.tail[self._rows, w],
             )
         return self._legs.target, self._legs.start
 
@@ -197,11 +201,15 @@ class RouteAutopilot(Autopilot):
     def _progress(self, pos):
         """:meth:`progress` at the members' positions ``pos`` (k, 2) m."""
         tgt, _ = self._target()
-        remaining = np.linalg.norm(tgt - pos, axis=1) + self.tail[self._rows, self._legs.w]
+        remaining = np.linalg.norm(tgt - pos, axis=1) + self._legs.tail
         out = np.where(self.done, self.planned, self.planned - remaining)
+        return self._progress_no_waypoints(pos, out)
+
+    def _progress_no_waypoints(self, pos, out):
+        """``out`` with the members without waypoints given their progress along the
+        initial heading, like "straight"."""
         if not self._no_waypoints:
             return out
-        # no waypoints: progress along the initial heading, like "straight"
         d = pos - self.start
         along = d[:, 0] * np.cos(self.heading0) + d[:, 1] * np.sin(self.heading0)
         return np.where(self.count == 0, along, out)
@@ -225,9 +233,21 @@ class RouteAutopilot(Autopilot):
 
     def route_state(self, state):
         """:meth:`route_geometry` and :meth:`progress` in one call (the env reads both
-        every step): ``(index, done, cross_track, bearing, distance, progress)``."""
+        every step): ``(index, done, cross_track, bearing, distance, progress)``. One
+        numba pass (:func:`_route_state_rows`) after numpy's ``arctan2`` of the bearings;
+        the same values as :meth:`route_geometry` and :meth:`progress` bit for bit."""
         pos = state.positions[self.members]
-        return self._route_geometry(pos) + (self._progress(pos),)
+        tgt, prev = self._target()
+        legs = self._legs
+        d = tgt - pos
+        bearing = np.arctan2(d[:, 1], d[:, 0])
+        out = np.empty((4, pos.shape[0]))
+        _route_state_rows(
+            pos, tgt, prev, legs.leg, legs.length, legs.ahead, legs.tail, self.planned,
+            self.done, bearing, out,
+        )  # fmt: skip
+        progress = self._progress_no_waypoints(pos, out[3])
+        return self.index.copy(), self.done.copy(), out[0], out[1], out[2], progress
 
     def _route_geometry(self, pos):
         """:meth:`route_geometry` at the members' positions ``pos`` (k, 2) m."""
@@ -248,6 +268,32 @@ class RouteAutopilot(Autopilot):
             np.where(ahead, bearing, 0.0),
             np.where(ahead, distance, np.nan),
         )
+
+
+@njit(cache=True)
+def _route_state_rows(
+    pos, target, start, leg, length, ahead, tail, planned, done, bearing, out
+):  # pragma: no cover - compiled
+    """:meth:`RouteAutopilot.route_state`'s rows of k members: ``out`` (4, k) ← cross-track
+    m, bearing rad, distance m, progress m, from the positions ``pos``, the legs' target,
+    start, vector (k, 2) m and length (k,) m, ``ahead`` and ``done`` (k,) bool, ``tail``
+    and ``planned`` (k,) m and numpy's ``bearing`` (k,) rad to the target. Each value as
+    :meth:`RouteAutopilot._route_geometry` and :meth:`RouteAutopilot._progress` compute it
+    (``hypot`` is the C library's in both; ``norm`` of two components is ``sqrt(x² + y²)``)."""
+    for a in range(pos.shape[0]):
+        dx, dy = target[a, 0] - pos[a, 0], target[a, 1] - pos[a, 1]
+        if ahead[a]:
+            if length[a] > 1e-9:
+                rx, ry = pos[a, 0] - start[a, 0], pos[a, 1] - start[a, 1]
+                out[0, a] = (leg[a, 0] * ry - leg[a, 1] * rx) / length[a]
+            else:
+                out[0, a] = 0.0
+            out[1, a] = bearing[a]
+            out[2, a] = math.hypot(dx, dy)
+        else:
+            out[0, a], out[1, a], out[2, a] = 0.0, 0.0, np.nan
+        remaining = math.sqrt(dx * dx + dy * dy) + tail[a]
+        out[3, a] = planned[a] if done[a] else planned[a] - remaining
 
 
 @register("autopilot", "markov")
