@@ -142,3 +142,32 @@ def test_route_state_matches_route_geometry_and_progress_bit_for_bit():
         pos = pos + 250.0 * np.stack([np.cos(heading), np.sin(heading)], axis=1)
         ap.after_step(FlightState(pos, heading, speeds, np.full(pos.shape[0], 0.05), 1.0, step))
     assert seen_done
+
+
+@pytest.mark.parametrize("case", range(4))
+def test_intruders_into_matches_the_batch_encoding_bit_for_bit(case):
+    rng = np.random.default_rng(10 + case)
+    A, T = 5, (0, 3, 40, 60)[case]
+    x = rng.normal(0, 10000, (T, 5))
+    x[:, [1, 3]] = rng.normal(0, 200, (T, 2))
+    if T:
+        x[rng.random(T) < 0.15, rng.integers(0, 4)] = np.nan  # ignored tracks
+        x[1] = x[0]  # a tie in range: by track order
+    B = rng.normal(size=(T, 5, 5))
+    P = B @ B.transpose(0, 2, 1) * 1e4
+    mu = rng.dirichlet([1, 1, 1], T)
+    slot = rng.integers(0, A - 1, T)  # the last ownship has no track
+    if T:
+        slot[1] = slot[0]
+    own_pos = rng.normal(0, 1000, (A, 2))
+    own_vel = rng.normal(0, 200, (A, 2))
+    hd = rng.uniform(-np.pi, np.pi, A)
+    lay = sp.ObservationLayout(3, 3, 40000.0, 3000.0, 120.0)
+    want = sp.encode_intruders_batch(lay, slot, own_pos, own_vel, hd, x, P, mu)
+    obs = np.full((A, lay.size), 7.0)  # the own block is left alone, the rest overwritten
+    sp.encode_intruders_into(lay, slot, own_pos, own_vel, hd, x, P, mu, obs)
+    assert np.all(obs[:, : lay.own_size] == 7.0)
+    got = obs[:, lay.own_size :].reshape(A, 3, -1)
+    assert np.array_equal(_bits(got), _bits(want))
+    if T >= 40:
+        assert (got[:, :, 0] == 1).sum() == 3 * (A - 1)  # K rows kept per tracked ownship

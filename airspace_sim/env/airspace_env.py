@@ -534,7 +534,7 @@ class AirspaceParallelEnv(ParallelEnv):
     def _observe_all(self, agents) -> dict:
         """Observations of ``agents`` (see :mod:`.spaces` for the layout), batched into one
         (A, size) buffer: the own block by :func:`.spaces.encode_own_rows`, the intruder
-        block by :func:`.spaces.encode_intruders_batch`."""
+        block by :func:`.spaces.encode_intruders_into`."""
         agents = list(agents)
         if not agents:
             return {}
@@ -576,10 +576,9 @@ class AirspaceParallelEnv(ParallelEnv):
             slot_of[idx] = np.arange(idx.size)
             rows = np.flatnonzero(slot_of[tr.owner] >= 0)
             slot = slot_of[tr.owner[rows]]
-        intr = sp.encode_intruders_batch(
-            lay, slot, pos, vel, heading, tr.x[rows], tr.P[rows], tr.mu[rows]
+        sp.encode_intruders_into(
+            lay, slot, pos, vel, heading, tr.x[rows], tr.P[rows], tr.mu[rows], obs
         )
-        obs[:, lay.own_size :] = intr.reshape(idx.size, -1)
         obs = sp.finish_in_place(lay, obs)
         return dict(zip(agents, obs))
 

@@ -305,6 +305,88 @@ def encode_intruders_batch(
     return out
 
 
+def encode_intruders_into(
+    layout: ObservationLayout,
+    slot: np.ndarray,
+    own_pos: np.ndarray,
+    own_vel: np.ndarray,
+    heading: np.ndarray,
+    x: np.ndarray,
+    P: np.ndarray,
+    mu: np.ndarray,
+    obs: np.ndarray,
+) -> None:
+    """:func:`encode_intruders_batch` written into the intruder block of ``obs`` (A, size)
+    float64 (columns ``own_size`` on), every row of it (unused rows zero), in one numba
+    pass (:func:`_intruders_into`): the same values bit for bit. ``x`` (T, 5), ``P``
+    (T, 5, 5), ``mu`` (T, M) float64 C-contiguous (a :class:`~.trackers.TrackView`'s)."""
+    _intruders_into(
+        np.asarray(slot, dtype=np.int64),
+        np.ascontiguousarray(x, dtype=np.float64),
+        np.ascontiguousarray(P, dtype=np.float64),
+        np.ascontiguousarray(mu, dtype=np.float64),
+        own_pos,
+        own_vel,
+        heading,
+        layout.sensor_range,
+        layout.r_safe,
+        layout.lookahead,
+        layout.own_size,
+        layout.n_intruders,
+        obs,
+    )
+
+
+@njit(cache=True, error_model="numpy")
+def _intruders_into(
+    slot, x, P, mu, own_pos, own_vel, heading, rng_, r_safe, look, col0, K, obs
+):  # pragma: no cover - compiled
+    """:func:`encode_intruders_into`: zero the block, keep the tracks with finite
+    ``x[:, :4]``, order them by (ownship, ``hypot`` range, track row) as
+    :func:`encode_intruders_batch`'s ``lexsort`` does (a total order: the same rows),
+    then :func:`_encode_rows` into a (A, K, F) scratch copied into ``obs``."""
+    A = obs.shape[0]
+    F = (obs.shape[1] - col0) // K if K > 0 else 0
+    for a in range(A):
+        for c in range(col0, obs.shape[1]):
+            obs[a, c] = 0.0
+    T = x.shape[0]
+    if T == 0 or K == 0 or A == 0:
+        return
+    dist = np.empty(T)
+    order = np.empty(T, dtype=np.int64)
+    n = 0
+    for t in range(T):
+        if not (
+            math.isfinite(x[t, 0])
+            and math.isfinite(x[t, 1])
+            and math.isfinite(x[t, 2])
+            and math.isfinite(x[t, 3])
+        ):
+            continue
+        a = slot[t]
+        d = math.hypot(x[t, 0] - own_pos[a, 0], x[t, 2] - own_pos[a, 1])
+        dist[t] = d
+        # insertion by (slot, dist, t): t is larger than every row placed before it
+        k = n
+        while k > 0:
+            q = order[k - 1]
+            if slot[q] < a or (slot[q] == a and not (d < dist[q])):
+                break
+            order[k] = q
+            k -= 1
+        order[k] = t
+        n += 1
+    rows = np.zeros((A, K, F))
+    _encode_rows(
+        order[:n], slot, dist, x, P, mu, own_pos, own_vel, heading, rng_, r_safe, look, rows
+    )
+    for a in range(A):
+        for k in range(K):
+            for f in range(F):
+                obs[a, col0 + k * F + f] = rows[a, k, f]
+
+
 @njit(cache=True, error_model="numpy")
 def _encode_rows(order, slot, dist, x, P, mu, own_pos, own_vel, heading, rng_, r_safe, look, out):
     """The rows of :func:`encode_intruders_batch`, written into ``out`` (A, K, F): tracks
