@@ -23,6 +23,7 @@ from airspace_sim.geometry import wrap_angle
 from airspace_sim.parts import Autopilot, NoParams
 from airspace_sim.registry import register
 from airspace_sim.world import streams
+from airspace_sim.world.flight import clip_array_bounds, wrap
 
 
 @dataclass
@@ -173,13 +174,48 @@ class RouteAutopilot(Autopilot):
         h = np.arctan2(d[:, 1], d[:, 0])
         out = np.where(self._legs.hold, self.heading0, h)
         out.flags.writeable = False
-        self._desired = (state, out)
+        self._desired = (state, out, None)
         return out
 
     def turn_rate(self, state):
-        return _toward(self.desired_heading(state), state, self.members)
+        return self.commands(state)[0]
+
+    def commands(self, state):
+        """``(turn_rate, desired_heading)`` (k,) rad/s and rad in one numba pass
+        (:func:`_route_turns`) after numpy's ``arctan2`` of the bearings: the values of
+        :meth:`desired_heading` and ``_toward`` bit for bit. The world reads both."""
+        last = self._desired
+        if last is not None and last[0] is state and last[2] is not None:
+            return last[2], last[1]
+        tgt, _ = self._target()
+        d = tgt - state.positions[self.members]
+        heading_to = np.arctan2(d[:, 1], d[:, 0])
+        desired = np.empty(self.members.size)
+        rate = np.empty(self.members.size)
+        _route_turns(
+            heading_to, self._legs.hold, self.heading0, self.members, state.headings,
+            state.max_turn_rate, state.dt, desired, rate,
+        )  # fmt: skip
+        desired.flags.writeable = False
+        self._desired = (state, desired, rate)
+        return rate, desired
 
     def after_step(self, state):
+        """Waypoint capture (the class docstring's rule), at most one waypoint per member
+        and step checked twice, in one numba pass (:func:`_capture`); returns (k,) bool
+        finished."""
+        index = self.index.copy()
+        if _capture(
+            state.positions, self.members, state.speeds, state.dt, self.wp, self.prev,
+            self.count, index, self.done,
+        ):  # fmt: skip
+            self.index = index
+            self._legs = self._desired = None
+        return self.done.copy()
+
+    def after_step_reference(self, state):
+        """:meth:`after_step` as numpy statements (the reference the kernel is tested
+        against)."""
         pos = state.positions[self.members]
         step_len = state.speeds[self.members] * state.dt
         for _ in range(2):  # a step can at most reach one waypoint; twice for safety
@@ -268,6 +304,51 @@ class RouteAutopilot(Autopilot):
             np.where(ahead, bearing, 0.0),
             np.where(ahead, distance, np.nan),
         )
+
+
+@njit(cache=True)
+def _route_turns(
+    heading_to, hold, heading0, members, headings, max_rate, dt, desired, rate
+):  # pragma: no cover - compiled
+    """:meth:`RouteAutopilot.commands` of k members: ``desired`` (k,) rad ← ``heading0``
+    where ``hold`` else numpy's ``heading_to`` (bearing to the target), ``rate`` (k,) rad/s
+    ← ``clip(wrap(desired − heading) / dt, ±max_rate)`` (``_toward``); ``headings`` and
+    ``max_rate`` (N,) indexed by ``members``."""
+    for a in range(members.size):
+        i = members[a]
+        des = heading0[a] if hold[a] else heading_to[a]
+        desired[a] = des
+        rate[a] = clip_array_bounds(wrap(des - headings[i]) / dt, -max_rate[i], max_rate[i])
+
+
+@njit(cache=True)
+def _capture(pos, members, speeds, dt, wp, prev, count, index, done):  # pragma: no cover
+    """:meth:`RouteAutopilot.after_step_reference` of k members in one pass, ``index`` and
+    ``done`` (k,) updated in place: up to two captures per member, each ``|to_wp| ≤ speed·dt``
+    (the C library's ``hypot``, as numpy's) or ``to_wp · (target − leg start) < 0`` (two
+    products and one sum, as numpy's ``einsum`` of two terms). ``pos`` and ``speeds``
+    (N,) indexed by ``members``; ``wp``, ``prev`` (k, W, 2) m. Returns whether an index
+    moved."""
+    moved = False
+    W = wp.shape[1]
+    for a in range(members.size):
+        i = members[a]
+        step_len = speeds[i] * dt
+        for _ in range(2):
+            if done[a] or count[a] <= 0:
+                break
+            w = min(index[a], W - 1)
+            tx, ty = wp[a, w, 0], wp[a, w, 1]
+            dx, dy = tx - pos[i, 0], ty - pos[i, 1]
+            near = math.hypot(dx, dy) <= step_len
+            passed = dx * (tx - prev[a, w, 0]) + dy * (ty - prev[a, w, 1]) < 0.0
+            if not (near or passed):
+                break
+            index[a] += 1
+            moved = True
+            if index[a] >= count[a]:
+                done[a] = True
+    return moved
 
 
 @njit(cache=True)
