@@ -236,32 +236,115 @@ class TrackView:
     """Read-only dense arrays over the live tracks of a :class:`TrackTable`, in slot order
     (``P`` live tracks): ``slots``, ``owner``, ``intruder``, ``misses``, ``age`` (steps
     since the track started) (P,) int; ``x`` (P, 5); ``mu`` (P, M); ``P`` (P, 5, 5),
-    gathered when first read. Valid until the table's next update."""
+    gathered when first read. Valid until the table's next update: for the built-in
+    trackers the arrays are views of buffers the table keeps and gathers into again at the
+    next :meth:`TrackTable.view` (:class:`_LiveTracks`, one numba pass), so a caller that
+    keeps them past an update copies them."""
 
-    __slots__ = ("slots", "owner", "intruder", "misses", "age", "x", "mu", "_tracker", "_P")
+    __slots__ = ("slots", "owner", "intruder", "misses", "age", "x", "mu", "_live", "_P")
 
     def __init__(self, table: TrackTable):
         t = table.tracker
-        s = np.flatnonzero(t.alive)
-        self.slots = _ro(s)
-        # (np.take: a row gather several times faster than fancy indexing)
-        self.owner = _ro(np.take(table._owner, s))
-        self.intruder = _ro(np.take(table._intruder, s))
-        self.misses = _ro(np.take(table._misses, s))
-        self.age = _ro(np.take(table._age, s))
-        self.x = _ro(np.take(t.x, s, axis=0))
-        self.mu = _ro(np.take(t.mu, s, axis=0))
-        self._tracker = t
         self._P = None
+        if type(t) in (ImmTracker, TruthTracker):  # float64 arrays of one capacity
+            self._live = table._live_tracks()
+            fields = self._live.gather(table)
+        else:  # another tracker: numpy's gathers of whatever its arrays are
+            self._live = t
+            s = np.flatnonzero(t.alive)
+            # (np.take: a row gather several times faster than fancy indexing)
+            arrays = (table._owner, table._intruder, table._misses, table._age, t.x, t.mu)
+            fields = (_ro(s),) + tuple(_ro(np.take(a, s, axis=0)) for a in arrays)
+        (self.slots, self.owner, self.intruder, self.misses, self.age, self.x, self.mu) = fields
 
     @property
     def P(self) -> np.ndarray:
         if self._P is None:
-            self._P = _ro(np.take(self._tracker.P, self.slots, axis=0))
+            if isinstance(self._live, _LiveTracks):
+                self._P = self._live.gather_P()
+            else:
+                self._P = _ro(np.take(self._live.P, self.slots, axis=0))
         return self._P
 
     def __len__(self) -> int:
         return int(self.slots.size)
+
+
+@njit(cache=True)
+def _gather_live(alive, owner, intruder, misses, age, x, mu, o_slots, o_owner, o_intruder,
+                 o_misses, o_age, o_x, o_mu):  # fmt: skip  # pragma: no cover - compiled
+    """The live slots' rows of the (capacity,) bookkeeping and the tracker's ``x``, ``mu``
+    written densely into the ``o_`` buffers, in slot order; returns their number."""
+    k = 0
+    for s in range(alive.size):
+        if alive[s]:
+            o_slots[k] = s
+            o_owner[k] = owner[s]
+            o_intruder[k] = intruder[s]
+            o_misses[k] = misses[s]
+            o_age[k] = age[s]
+            for c in range(x.shape[1]):
+                o_x[k, c] = x[s, c]
+            for m in range(mu.shape[1]):
+                o_mu[k, m] = mu[s, m]
+            k += 1
+    return k
+
+
+@njit(cache=True)
+def _gather_rows3(P, slots, out):  # pragma: no cover - compiled
+    """``out[k] = P[slots[k]]`` for (S, a, b) ``P``."""
+    for k in range(slots.size):
+        s = slots[k]
+        for a in range(P.shape[1]):
+            for b in range(P.shape[2]):
+                out[k, a, b] = P[s, a, b]
+
+
+class _LiveTracks:
+    """The buffers a :class:`TrackTable`'s views are gathered into, kept across updates
+    (one numba pass per view instead of a gather and a read-only wrapper per array), with
+    the read-only views of their first ``P`` rows kept while ``P`` does not change."""
+
+    def __init__(self, capacity: int, n_modes: int):
+        self.capacity = capacity
+        self.n_modes = n_modes
+        i64 = np.int64
+        self.arrays = (
+            np.empty(capacity, i64),
+            np.empty(capacity, i64),
+            np.empty(capacity, i64),
+            np.empty(capacity, i64),
+            np.empty(capacity, i64),
+            np.empty((capacity, 5)),
+            np.empty((capacity, n_modes)),
+        )
+        self.P_buf = np.empty((capacity, 5, 5))
+        self.count = -1
+        self.views = None
+        self.P_view = None
+        self.tracker = None
+
+    def gather(self, table: TrackTable):
+        """``(slots, owner, intruder, misses, age, x, mu)`` of the live tracks, read-only
+        views of the buffers, gathered now."""
+        t = self.tracker = table.tracker
+        alive, x, mu = t.alive, t.x, t.mu
+        if not (alive.shape[0] == x.shape[0] == mu.shape[0] == self.capacity):
+            raise ValueError("track views: the tracker's arrays are not of its capacity")
+        k = _gather_live(
+            alive, table._owner, table._intruder, table._misses, table._age, x, mu,
+            *self.arrays,
+        )  # fmt: skip
+        if k != self.count:
+            self.count = k
+            self.views = tuple(_ro(a[:k]) for a in self.arrays)
+            self.P_view = _ro(self.P_buf[:k])
+        return self.views
+
+    def gather_P(self) -> np.ndarray:
+        _gather_rows3(self.tracker.P, self.views[0], self.P_buf)
+        return self.P_view
 
 
 class TrackTable:
@@ -352,6 +435,23 @@ class TrackTable:
         if self._view is None:
             self._view = TrackView(self)
         return self._view
+
+    def _live_tracks(self) -> _LiveTracks:
+        """The view buffers (:class:`_LiveTracks`), (re)made for the tracker's capacity
+        and modes."""
+        cap, m = self.tracker.mu.shape
+        live = self.__dict__.get("_live")
+        if live is None or live.capacity != cap or live.n_modes != m:
+            live = self._live = _LiveTracks(cap, m)
+        return live
+
+    def __getstate__(self) -> dict:
+        """The table without its view and view buffers (derived state: pickled arrays are
+        no longer views of the buffers), made again at the next :meth:`view`."""
+        state = self.__dict__.copy()
+        state.pop("_live", None)
+        state["_view"] = None
+        return state
 
     # ----------------------------------------------------------------- update
     def update(
