@@ -520,12 +520,13 @@ class AirspaceParallelEnv(ParallelEnv):
         case, one float array of shape (1,) per agent as vector envs send, is checked in
         one go; anything else goes through :func:`.spaces.decode_action` one by one."""
         got = [actions.get(a) for a in acting]
+        one = (1,)
         if not self.discrete_actions and all(
-            type(g) is np.ndarray and g.shape == (1,) and g.dtype.kind == "f" for g in got
+            type(g) is np.ndarray and g.shape == one and g.dtype.kind == "f" for g in got
         ):
-            frac = np.concatenate(got).astype(np.float64) if got else np.zeros(0)
-            if np.isfinite(frac).all():
-                return np.clip(frac, -1.0, 1.0)
+            frac = np.empty(len(got))
+            if not got or sp.fractions_into(np.concatenate(got), frac):
+                return frac
         return np.array(
             [sp.decode_action(a, g, self.discrete_actions) for a, g in zip(acting, got)]
         )

@@ -220,6 +220,19 @@ def decode_action(agent: str, action, discrete: bool) -> float:
     return min(max(value, -1.0), 1.0)
 
 
+@njit(cache=True)
+def fractions_into(actions, out) -> bool:  # pragma: no cover - compiled
+    """``out`` (A,) float64 ← the continuous ``actions`` (A,) (any float dtype) clipped to
+    [-1, 1], as ``np.clip(actions.astype(np.float64), -1.0, 1.0)``; False (``out`` not
+    all written) if one is not finite, for :func:`decode_action` to report."""
+    for k in range(actions.size):
+        a = np.float64(actions[k])
+        if not np.isfinite(a):
+            return False
+        out[k] = -1.0 if a < -1.0 else (1.0 if a > 1.0 else a)
+    return True
+
+
 def _show(value) -> str:
     """A one-line, bounded rendering of a bad value for an error message."""
     text = repr(value).replace("\n", " ")

@@ -132,6 +132,7 @@ class RouteAutopilot(Autopilot):
         self.modes = None
         self._rows = np.arange(n)
         self._no_waypoints = bool((self.count == 0).any())
+        self._every_row = bool(np.array_equal(m, self._rows))  # members are 0..k-1
         self._legs = None  # _Legs of the current index and done; see _target
         # (FlightState, (k,) rad) of the last desired_heading: turn_rate asks for it and the
         # world again with the same state object (a new one every phase)
@@ -143,7 +144,15 @@ class RouteAutopilot(Autopilot):
         self.__dict__.update(state)
         self._rows = np.arange(self.members.size)
         self._no_waypoints = bool((self.count == 0).any())
+        self._every_row = bool(np.array_equal(self.members, self._rows))
         self._legs = self._desired = None
+
+    def _positions(self, state) -> np.ndarray:
+        """(k, 2) m, the members' positions: the world's array itself when the members
+        are all its aircraft in order (the same values as the gather)."""
+        if self._every_row and state.positions.shape[0] == self._rows.size:
+            return state.positions
+        return state.positions[self.members]
 
     def _target(self):
         """``(target, leg start)`` (k, 2) m of each member's current leg. What depends only
@@ -188,7 +197,7 @@ class RouteAutopilot(Autopilot):
         if last is not None and last[0] is state and last[2] is not None:
             return last[2], last[1]
         tgt, _ = self._target()
-        d = tgt - state.positions[self.members]
+        d = tgt - self._positions(state)
         heading_to = np.arctan2(d[:, 1], d[:, 0])
         desired = np.empty(self.members.size)
         rate = np.empty(self.members.size)
@@ -272,7 +281,7 @@ class RouteAutopilot(Autopilot):
         every step): ``(index, done, cross_track, bearing, distance, progress)``. One
         numba pass (:func:`_route_state_rows`) after numpy's ``arctan2`` of the bearings;
         the same values as :meth:`route_geometry` and :meth:`progress` bit for bit."""
-        pos = state.positions[self.members]
+        pos = self._positions(state)
         tgt, prev = self._target()
         legs = self._legs
         d = tgt - pos

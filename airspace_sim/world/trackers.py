@@ -450,6 +450,7 @@ class TrackTable:
         no longer views of the buffers), made again at the next :meth:`view`."""
         state = self.__dict__.copy()
         state.pop("_live", None)
+        state.pop("_tracks_of_view", None)  # snapshot.live_tracks' of the kept views
         state["_view"] = None
         return state
 
