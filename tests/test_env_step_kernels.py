@@ -171,3 +171,39 @@ def test_intruders_into_matches_the_batch_encoding_bit_for_bit(case):
     assert np.array_equal(_bits(got), _bits(want))
     if T >= 40:
         assert (got[:, :, 0] == 1).sum() == 3 * (A - 1)  # K rows kept per tracked ownship
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_fractions_and_turn_rates_match_clip_and_scatter_bit_for_bit(dtype):
+    rng = np.random.default_rng(20)
+    raw = rng.uniform(-3, 3, 300).astype(dtype)
+    raw[:6] = [-0.0, 0.0, 1.0, -1.0, 2.0, -2.0]
+    out = np.empty(raw.size)
+    assert sp.fractions_into(raw, out)
+    want = np.clip(raw.astype(np.float64), -1.0, 1.0)
+    assert np.array_equal(_bits(out), _bits(want))
+    for bad in (np.nan, np.inf, -np.inf):
+        raw[7] = bad
+        assert not sp.fractions_into(raw, np.empty(raw.size))
+    n = 40
+    idx = rng.permutation(n)[:25]
+    frac, max_rate = want[:25].copy(), np.radians(rng.choice([0.0, 3.0], n))
+    frac[3] = np.nan  # this agent leaves the step to the built-in pilot
+    rates = np.full(n, 5.0)
+    sp.turn_rates_into(frac, idx, max_rate, rates)
+    want_rates = np.full(n, np.nan)
+    want_rates[idx] = frac * max_rate[idx]
+    assert np.array_equal(_bits(rates), _bits(want_rates))
+
+
+def test_half_precision_actions_take_the_one_by_one_path_with_the_same_values():
+    """numba has no float16: such actions are decoded one by one, to the same fractions."""
+    import airspace_sim.env as aenv
+
+    env = aenv.make("ring4")
+    env.reset(seed=0)
+    acts = {a: np.array([v], np.float16) for a, v in zip(env.agents, [-3.0, -0.0, 0.5, 1.5])}
+    frac = env._decode(list(env.agents), acts)
+    assert frac.tolist() == [-1.0, -0.0, 0.5, 1.0] and np.signbit(frac[1])
+    wide = {a: v.astype(np.float32) for a, v in acts.items()}
+    assert np.array_equal(_bits(env._decode(list(env.agents), wide)), _bits(frac))

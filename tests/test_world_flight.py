@@ -177,3 +177,18 @@ def test_world_on_the_kernels_matches_the_numpy_motion(name, overrides):
                      (a.velocities, b.velocities), (a.turn_rates, b.turn_rates)):  # fmt: skip
             assert np.array_equal(_bits(x), _bits(y))
     assert json.dumps(a.metrics(), default=str) == json.dumps(b.metrics(), default=str)
+
+
+def test_agent_masks_match_the_numpy_masks():
+    rng = np.random.default_rng(8)
+    n = 300
+    hr = rng.uniform(-0.1, 0.1, n)
+    hr[rng.random(n) < 0.3] = np.nan
+    controlled, avoid, moved = (rng.random((3, n)) < 0.5).astype(bool)
+    agent, flies = np.empty(n, bool), np.empty(n, bool)
+    assert not flight.agent_masks(hr, controlled, avoid, moved, agent, flies)
+    want_agent = controlled & np.isfinite(hr)
+    assert np.array_equal(agent, want_agent)
+    assert np.array_equal(flies, avoid & ~moved & ~want_agent)
+    hr[17] = -np.inf
+    assert flight.agent_masks(hr, controlled, avoid, moved, agent, flies)

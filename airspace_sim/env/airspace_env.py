@@ -438,8 +438,8 @@ class AirspaceParallelEnv(ParallelEnv):
         # every aircraft in order: views instead of gathers (the same values)
         sel = slice(None) if everyone else idx
         frac = self._decode(acting, actions)
-        rates = np.full(w.n, np.nan)
-        rates[sel] = frac * w.max_turn_rate[sel]
+        rates = np.empty(w.n)
+        sp.turn_rates_into(frac, idx, w.max_turn_rate, rates)
         w.step(rates)
         self.num_cycles += 1
 
@@ -517,12 +517,13 @@ class AirspaceParallelEnv(ParallelEnv):
 
     def _decode(self, acting, actions) -> np.ndarray:
         """(A,) turn fractions (NaN: built-in) of the acting agents' actions. The common
-        case, one float array of shape (1,) per agent as vector envs send, is checked in
-        one go; anything else goes through :func:`.spaces.decode_action` one by one."""
+        case, one float32 or float64 array of shape (1,) per agent as vector envs send, is
+        checked in one go (:func:`.spaces.fractions_into`); anything else goes through
+        :func:`.spaces.decode_action` one by one."""
         got = [actions.get(a) for a in acting]
         one = (1,)
         if not self.discrete_actions and all(
-            type(g) is np.ndarray and g.shape == one and g.dtype.kind == "f" for g in got
+            type(g) is np.ndarray and g.shape == one and g.dtype.char in "fd" for g in got
         ):
             frac = np.empty(len(got))
             if not got or sp.fractions_into(np.concatenate(got), frac):

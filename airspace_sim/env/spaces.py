@@ -233,6 +233,16 @@ def fractions_into(actions, out) -> bool:  # pragma: no cover - compiled
     return True
 
 
+@njit(cache=True)
+def turn_rates_into(frac, idx, max_rate, rates):  # pragma: no cover - compiled
+    """``rates`` (N,) rad/s ← NaN (the built-in pilot), then ``frac[k] · max_rate[i]`` for
+    each acting agent ``k`` of aircraft ``i = idx[k]`` (``frac`` NaN: built-in too)."""
+    rates[:] = np.nan
+    for k in range(idx.size):
+        i = idx[k]
+        rates[i] = frac[k] * max_rate[i]
+
+
 def _show(value) -> str:
     """A one-line, bounded rendering of a bad value for an error message."""
     text = repr(value).replace("\n", " ")

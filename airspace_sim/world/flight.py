@@ -106,3 +106,20 @@ def pair_flags(i, j, flag):  # pragma: no cover - compiled
     for p in range(i.size):
         flag[i[p]] = True
         flag[j[p]] = True
+
+
+@njit(cache=True)
+def agent_masks(hr, controlled, avoid, moved, agent, flies_resolver):  # pragma: no cover
+    """The commands phase's masks from the RL agents' commands ``hr`` (N,) rad/s (NaN:
+    built-in): ``agent`` (N,) ← controlled and finite (the command is flown),
+    ``flies_resolver`` (N,) ← ``avoid & ~moved & ~agent``. Returns True if an entry of
+    ``hr`` is infinite (a user error)."""
+    inf = False
+    for i in range(hr.size):
+        h = hr[i]
+        if np.isinf(h):
+            inf = True
+        a = controlled[i] and np.isfinite(h)
+        agent[i] = a
+        flies_resolver[i] = avoid[i] and not moved[i] and not a
+    return inf

@@ -88,11 +88,15 @@ def _measurements_by_slot(Z, slot_of_det, z):
 
 
 @njit(cache=True)
-def _advance(live, owner, intruder, misses, age, slot_of_det, gated, scanned, drop_after, aircraft):
+def _advance(
+    live, owner, intruder, misses, age, slot_of_det, gated, scanned, drop_after, aircraft, out
+):  # pragma: no cover - compiled
     """One step of the per-slot bookkeeping (capacity,) arrays, in place: ``age`` + 1;
     on a scan ``misses`` + 1, reset to 0 for the slots detected (``slot_of_det`` ≥ 0)
     whose measurement the tracker used (not ``gated``, (capacity,) bool).
-    Returns the live slots to drop: too many misses, or owner or intruder gone."""
+    Writes the live slots to drop (too many misses, or owner or intruder gone) into
+    ``out`` (capacity,) and returns their number (an int, not an array: every array a
+    numba function returns costs a boxing and a ``_numba_unpickle`` call of its type)."""
     cap = live.size
     for s in range(cap):
         age[s] += 1
@@ -103,7 +107,6 @@ def _advance(live, owner, intruder, misses, age, slot_of_det, gated, scanned, dr
             s = slot_of_det[d]
             if s >= 0 and not gated[s]:
                 misses[s] = 0
-    out = np.empty(cap, dtype=np.int64)
     k = 0
     for s in range(cap):
         if live[s] and (
@@ -111,7 +114,7 @@ def _advance(live, owner, intruder, misses, age, slot_of_det, gated, scanned, dr
         ):
             out[k] = s
             k += 1
-    return out[:k]
+    return k
 
 
 def mode_names(preset: Preset) -> tuple[str, ...]:
@@ -359,6 +362,8 @@ class TrackTable:
     # ``gated`` of a tracker that never gates, resized by :meth:`update`; the class default
     # serves tables pickled before it existed (checkpoints)
     _no_gate = np.zeros(0, dtype=np.bool_)
+    # the slots :func:`_advance` drops, resized by :meth:`update` (class default: as above)
+    _drop_buf = np.zeros(0, dtype=np.int64)
 
     def __init__(
         self,
@@ -451,6 +456,7 @@ class TrackTable:
         state = self.__dict__.copy()
         state.pop("_live", None)
         state.pop("_tracks_of_view", None)  # snapshot.live_tracks' of the kept views
+        state.pop("_drop_buf", None)  # scratch
         state["_view"] = None
         return state
 
@@ -487,13 +493,15 @@ class TrackTable:
                 if self._no_gate.size != cap:
                     self._no_gate = np.zeros(cap, dtype=np.bool_)
                 gated = self._no_gate
-            drop = _advance(
+            if self._drop_buf.size != cap:
+                self._drop_buf = np.empty(cap, dtype=np.int64)
+            n_drop = _advance(
                 np.asarray(t.alive), self._owner, self._intruder, self._misses, self._age,
                 slot_of_det, gated, bool(scanned), self.drop_after,
-                np.asarray(alive, dtype=np.bool_),
+                np.asarray(alive, dtype=np.bool_), self._drop_buf,
             )  # fmt: skip
-            if drop.size:
-                self._drop(drop)
+            if n_drop:
+                self._drop(self._drop_buf[:n_drop].copy())
         # 3. births
         new = slot_of_det < 0
         if new.any():

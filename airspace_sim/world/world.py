@@ -249,18 +249,22 @@ class World:
                 rate[members] = ap.turn_rate(state)
                 desired[members] = ap.desired_heading(state)
         self._read_modes()
-        agent = np.zeros(n, dtype=bool)  # RL agents whose command is flown this step
+        # agent: RL agents whose command is flown this step; an avoiding agent that leaves
+        # a step to the built-in pilot flies the resolver too (avoid); recorded (kinematic)
+        # aircraft never do: they fly their recording
+        agent, avoid = np.empty(n, dtype=bool), np.empty(n, dtype=bool)
         hr = rate
         if heading_rate is not None:
             hr = np.asarray(heading_rate, dtype=float).reshape(-1)
             if hr.shape != (n,):
                 raise UserError(f"heading_rate: expected shape ({n},), got {hr.shape}")
-            if np.isinf(hr).any():
+            if flight.agent_masks(hr, self.controlled, self.avoid, self.moved, agent, avoid):
                 raise UserError("heading_rate: contains an infinite value (use NaN for 'built-in')")
-            agent = self.controlled & np.isfinite(hr)
-        # an avoiding agent that leaves a step to the built-in pilot flies the resolver too;
-        # recorded (kinematic) aircraft never do: they fly their recording
-        avoid = self.avoid & ~self.moved & ~agent if self.controlled.any() else None
+        else:
+            agent[:] = False
+            np.logical_and(self.avoid, ~self.moved, out=avoid)
+        if not self.controlled.any():
+            avoid = None
         rate = self.policy.override(
             rate, desired, self.active, self.velocities, self.max_turn_rate * self.dt, avoid
         )
