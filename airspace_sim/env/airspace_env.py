@@ -481,16 +481,32 @@ class AirspaceParallelEnv(ParallelEnv):
         ended = ended.tolist()
         nearest = nearest.tolist()
         arrived = done.tolist()
-        infos = self._infos(acting, sel)
-        rewards, terms, truncs = {}, {}, {}
-        for k, a in enumerate(acting):
+        time, step = float(w.time), int(w.step_count)
+        cols = zip(
+            w.conflict[sel].tolist(),
+            w.in_los[sel].tolist(),
+            w.nmac[sel].tolist(),
+            w.advice[sel].tolist(),
+            self._route[0][sel].tolist(),
+        )
+        rewards, terms, truncs, infos = {}, {}, {}, {}
+        for k, (a, (c, los, nm, adv, wp)) in enumerate(zip(acting, cols)):
             rewards[a] = total[k]
             terms[a] = ended[k]
             truncs[a] = truncated and not ended[k]
-            info = infos[a]
-            info["reward_terms"] = dict(zip(names, weighted[k]))
-            info["arrived"] = arrived[k]
-            info["separation_m"] = nearest[k]
+            # the keys of _infos, then the step's
+            infos[a] = {
+                "time": time,
+                "step": step,
+                "conflict": c,
+                "in_los": los,
+                "nmac": nm,
+                "advice": adv,
+                "waypoint_index": wp,
+                "reward_terms": dict(zip(names, weighted[k])),
+                "arrived": arrived[k],
+                "separation_m": nearest[k],
+            }
         obs = self._observe_all(acting)
         self.agents = [a for a in acting if not (terms[a] or truncs[a])]
         if self.ended == "leave":

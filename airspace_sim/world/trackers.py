@@ -250,8 +250,7 @@ class TrackView:
         t = table.tracker
         self._P = None
         if type(t) in (ImmTracker, TruthTracker):  # float64 arrays of one capacity
-            self._live = table._live_tracks()
-            fields = self._live.gather(table)
+            self._live, fields = table._gather_live_view()
         else:  # another tracker: numpy's gathers of whatever its arrays are
             self._live = t
             s = np.flatnonzero(t.alive)
@@ -328,11 +327,11 @@ class _LiveTracks:
         self.P_view = None
         self.tracker = None
 
-    def gather(self, table: TrackTable):
+    def gather(self, table: TrackTable, alive, x, mu):
         """``(slots, owner, intruder, misses, age, x, mu)`` of the live tracks, read-only
-        views of the buffers, gathered now."""
-        t = self.tracker = table.tracker
-        alive, x, mu = t.alive, t.x, t.mu
+        views of the buffers, gathered now from the table and its tracker's ``alive``,
+        ``x``, ``mu``."""
+        self.tracker = table.tracker
         if not (alive.shape[0] == x.shape[0] == mu.shape[0] == self.capacity):
             raise ValueError("track views: the tracker's arrays are not of its capacity")
         k = _gather_live(
@@ -441,14 +440,16 @@ class TrackTable:
             self._view = TrackView(self)
         return self._view
 
-    def _live_tracks(self) -> _LiveTracks:
-        """The view buffers (:class:`_LiveTracks`), (re)made for the tracker's capacity
-        and modes."""
-        cap, m = self.tracker.mu.shape
+    def _gather_live_view(self):
+        """``(buffers, fields)``: the view buffers (:class:`_LiveTracks`, (re)made for the
+        tracker's capacity and modes) and the live tracks gathered into them."""
+        t = self.tracker
+        alive, x, mu = t.alive, t.x, t.mu
+        cap, m = mu.shape
         live = self.__dict__.get("_live")
         if live is None or live.capacity != cap or live.n_modes != m:
             live = self._live = _LiveTracks(cap, m)
-        return live
+        return live, live.gather(self, alive, x, mu)
 
     def __getstate__(self) -> dict:
         """The table without its view and view buffers (derived state: pickled arrays are
