@@ -296,3 +296,32 @@ def test_a_table_pickled_before_the_gating_rule_continues():
     t2 = pickle.loads(pickle.dumps(t))
     t2.update(1.0, True, [0], [1], np.zeros((1, 2)), np.ones(N, bool), truth)
     assert len(t2) == 1 and t2.view().misses.tolist() == [0]
+
+
+def test_kept_view_buffers_hold_numpys_gathers_through_births_drops_and_pickling():
+    """The view's kept buffers (one numba gather per update) against numpy's gathers of the
+    table, every step of a world whose tracks start, drop and grow the capacity; a pickled
+    table rebuilds them."""
+    import pickle
+
+    from airspace_sim.scenarios import load
+    from airspace_sim.world import World
+
+    w = World(load("ring", ["traffic.count=8", "sensor.drop_after_misses=1"]), seed=2)
+    caps, counts = set(), set()
+    for step in range(160):
+        w.step()
+        t = w.tracks
+        v = t.view()
+        s = np.flatnonzero(t.tracker.alive)
+        want = (s, t._owner[s], t._intruder[s], t._misses[s], t._age[s], t.tracker.x[s])
+        got = (v.slots, v.owner, v.intruder, v.misses, v.age, v.x)
+        for g, a in zip(got + (v.mu, v.P), want + (t.tracker.mu[s], t.tracker.P[s])):
+            assert g.dtype == a.dtype and g.tobytes() == a.tobytes()
+            assert not g.flags.writeable
+        caps.add(t.tracker.capacity)
+        counts.add(len(v))
+        if step == 100:
+            w = pickle.loads(pickle.dumps(w))
+            assert w.tracks._view is None and "_live" not in w.tracks.__dict__
+    assert len(counts) > 3 and len(caps) > 1

@@ -236,7 +236,8 @@ class AirspaceParallelEnv(ParallelEnv):
         self.render_mode = render_mode
         self.max_cycles = max_cycles if max_cycles is not None else self.scenario.n_steps
         self.reward_weights = rw.merge_weights(reward)
-        self._term_names = list(rw.DEFAULT_WEIGHTS)
+        self._term_names = list(rw.TERMS)
+        self._weights = np.array([self.reward_weights[t] for t in rw.TERMS], dtype=float)
         self._default_seed = self.scenario.seed if seed is None else seed
         self._seed_rng = None  # draws world seeds for reset(seed=None) after the first
         self._renderer = None
@@ -437,56 +438,75 @@ class AirspaceParallelEnv(ParallelEnv):
         # every aircraft in order: views instead of gathers (the same values)
         sel = slice(None) if everyone else idx
         frac = self._decode(acting, actions)
-        rates = np.full(w.n, np.nan)
-        rates[sel] = frac * w.max_turn_rate[sel]
+        rates = np.empty(w.n)
+        sp.turn_rates_into(frac, idx, w.max_turn_rate, rates)
         w.step(rates)
         self.num_cycles += 1
 
         self._route, covered = self._route_state()
-        done = self._route[1][sel]
-        gained = (covered - self._covered)[sel]
+        done = self._route[1]
+        A = idx.size
+        weighted = np.empty((A, len(rw.TERMS)))  # (A, terms) in TERMS order
+        nearest, ended = np.empty(A), np.empty(A, dtype=bool)
+        rw.step_terms(
+            idx,
+            self._weights,
+            w.positions,
+            *w.airspace.pair_arrays(LOS),
+            w.r_safe,
+            w.nmac_distance,
+            w.nmac,
+            w.conflict,
+            self._turns,
+            w.turn_rates,
+            w.max_turn_rate,
+            w.speeds,
+            w.dt,
+            covered,
+            self._covered,
+            self._planned,
+            done,
+            w.active,
+            self.max_cycles - self.num_cycles + 1,
+            weighted,
+            nearest,
+            ended,
+        )
         self._covered = covered
-        L = self._planned[sel]
-        has_route = L > 0
-        Ls = np.where(has_route, L, 1.0)
-        travel = np.where(has_route, w.speeds[sel] * w.dt / Ls, 0.0)
-        nearest = self._nearest(idx)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            turn = np.where(self._turns[sel], w.turn_rates[sel] / w.max_turn_rate[sel], 0.0)
-        nmac = w.nmac[sel]
-        wts = self.reward_weights
-        # (A, terms) weighted terms in DEFAULT_WEIGHTS order, column by column
-        weighted = np.empty((idx.size, len(self._term_names)))
-        col = dict(zip(self._term_names, weighted.T))
-        np.multiply(wts["los"], -rw.severity(nearest, w.r_safe, w.nmac_distance), out=col["los"])
-        if nmac.any():
-            c_max = rw.step_bound(wts, travel)
-            steps_left = self.max_cycles - self.num_cycles + 1
-            value = np.where(nmac, rw.nmac_value(wts, steps_left, c_max), 0)
-        else:
-            value = np.zeros(idx.size)
-        np.multiply(wts["nmac"], value, out=col["nmac"])
-        np.multiply(wts["conflict"], -w.conflict[sel].astype(float), out=col["conflict"])
-        np.multiply(wts["heading_change"], -(turn**2), out=col["heading_change"])
-        along = gained / Ls
-        np.multiply(wts["progress"], np.where(has_route, along, 0.0), out=col["progress"])
-        np.multiply(wts["path"], np.where(has_route, along - travel, 0.0), out=col["path"])
-        np.multiply(wts["arrival"], done.astype(float), out=col["arrival"])
+        done = done[sel]
         truncated = self.num_cycles >= self.max_cycles
         names = self._term_names
         total = weighted.sum(axis=1).tolist()
         weighted = weighted.tolist()
-        ended = (nmac | done | ~w.active[sel]).tolist()
-        infos = self._infos(acting, sel)
-        rewards, terms, truncs = {}, {}, {}
-        for k, a in enumerate(acting):
+        ended = ended.tolist()
+        nearest = nearest.tolist()
+        arrived = done.tolist()
+        time, step = float(w.time), int(w.step_count)
+        cols = zip(
+            w.conflict[sel].tolist(),
+            w.in_los[sel].tolist(),
+            w.nmac[sel].tolist(),
+            w.advice[sel].tolist(),
+            self._route[0][sel].tolist(),
+        )
+        rewards, terms, truncs, infos = {}, {}, {}, {}
+        for k, (a, (c, los, nm, adv, wp)) in enumerate(zip(acting, cols)):
             rewards[a] = total[k]
             terms[a] = ended[k]
             truncs[a] = truncated and not ended[k]
-            info = infos[a]
-            info["reward_terms"] = dict(zip(names, weighted[k]))
-            info["arrived"] = bool(done[k])
-            info["separation_m"] = float(nearest[k])
+            # the keys of _infos, then the step's
+            infos[a] = {
+                "time": time,
+                "step": step,
+                "conflict": c,
+                "in_los": los,
+                "nmac": nm,
+                "advice": adv,
+                "waypoint_index": wp,
+                "reward_terms": dict(zip(names, weighted[k])),
+                "arrived": arrived[k],
+                "separation_m": nearest[k],
+            }
         obs = self._observe_all(acting)
         self.agents = [a for a in acting if not (terms[a] or truncs[a])]
         if self.ended == "leave":
@@ -513,36 +533,26 @@ class AirspaceParallelEnv(ParallelEnv):
 
     def _decode(self, acting, actions) -> np.ndarray:
         """(A,) turn fractions (NaN: built-in) of the acting agents' actions. The common
-        case, one float array of shape (1,) per agent as vector envs send, is checked in
-        one go; anything else goes through :func:`.spaces.decode_action` one by one."""
+        case, one float32 or float64 array of shape (1,) per agent as vector envs send, is
+        checked in one go (:func:`.spaces.fractions_into`); anything else goes through
+        :func:`.spaces.decode_action` one by one."""
         got = [actions.get(a) for a in acting]
+        one = (1,)
         if not self.discrete_actions and all(
-            type(g) is np.ndarray and g.shape == (1,) and g.dtype.kind == "f" for g in got
+            type(g) is np.ndarray and g.shape == one and g.dtype.char in "fd" for g in got
         ):
-            frac = np.concatenate(got).astype(np.float64) if got else np.zeros(0)
-            if np.isfinite(frac).all():
-                return np.clip(frac, -1.0, 1.0)
+            frac = np.empty(len(got))
+            if not got or sp.fractions_into(np.concatenate(got), frac):
+                return frac
         return np.array(
             [sp.decode_action(a, g, self.discrete_actions) for a, g in zip(acting, got)]
         )
-
-    def _nearest(self, idx) -> np.ndarray:
-        """(len(idx),) m from each of these aircraft to the nearest aircraft in loss of
-        separation with it (inf when none is within r_safe)."""
-        w = self.world
-        out = np.full(w.n, np.inf)
-        i, j = w.airspace.pair_arrays(LOS)
-        if len(i):
-            d = np.hypot(*(w.positions[i] - w.positions[j]).T)
-            np.minimum.at(out, i, d)
-            np.minimum.at(out, j, d)
-        return out[idx]
 
     # ----------------------------------------------------------- observation
     def _observe_all(self, agents) -> dict:
         """Observations of ``agents`` (see :mod:`.spaces` for the layout), batched into one
         (A, size) buffer: the own block by :func:`.spaces.encode_own_rows`, the intruder
-        block by :func:`.spaces.encode_intruders_batch`."""
+        block by :func:`.spaces.encode_intruders_into`."""
         agents = list(agents)
         if not agents:
             return {}
@@ -584,10 +594,9 @@ class AirspaceParallelEnv(ParallelEnv):
             slot_of[idx] = np.arange(idx.size)
             rows = np.flatnonzero(slot_of[tr.owner] >= 0)
             slot = slot_of[tr.owner[rows]]
-        intr = sp.encode_intruders_batch(
-            lay, slot, pos, vel, heading, tr.x[rows], tr.P[rows], tr.mu[rows]
+        sp.encode_intruders_into(
+            lay, slot, pos, vel, heading, tr.x[rows], tr.P[rows], tr.mu[rows], obs
         )
-        obs[:, lay.own_size :] = intr.reshape(idx.size, -1)
         obs = sp.finish_in_place(lay, obs)
         return dict(zip(agents, obs))
 

@@ -45,6 +45,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from airspace_sim.errors import UserError
 
@@ -115,3 +116,96 @@ def severity(distance, r_safe: float, nmac: float) -> np.ndarray:
 def weighted_terms(weights: dict[str, float], values: dict[str, float]) -> dict[str, float]:
     """``{term: weight · value}`` for every known term (missing values count as 0)."""
     return {name: float(weights[name] * values.get(name, 0.0)) for name in DEFAULT_WEIGHTS}
+
+
+#: the weighted terms' columns, in :data:`DEFAULT_WEIGHTS` order (:func:`step_terms`)
+TERMS = tuple(DEFAULT_WEIGHTS)
+
+
+@njit(cache=True)
+def step_terms(
+    idx,
+    weights,
+    positions,
+    los_i,
+    los_j,
+    r_safe,
+    nmac_distance,
+    nmac,
+    conflict,
+    turns,
+    turn_rates,
+    max_rate,
+    speeds,
+    dt,
+    covered,
+    covered_before,
+    planned,
+    done,
+    active,
+    steps_left,
+    out,
+    nearest,
+    ended,
+):  # pragma: no cover - compiled
+    """Every agent's weighted terms of one step, in one pass (the env's step reads them).
+
+    idx (A,) int: the agents' aircraft indices into the (N,) world arrays; ``weights`` (7,)
+    in :data:`TERMS` order; ``positions`` (N, 2) m; ``los_i``, ``los_j`` (L,) the pairs in
+    loss of separation; ``r_safe``, ``nmac_distance`` m; ``nmac``, ``conflict``, ``done``
+    (finished route), ``active`` (N,) bool; ``turns`` (N,) bool (a turn-rate limit > 0),
+    ``turn_rates`` and ``max_rate`` rad/s, ``speeds`` m/s, ``dt`` s; ``covered`` and
+    ``covered_before`` (N,) m of route covered after and before the step, ``planned``
+    (N,) m route length (0: no route); ``steps_left`` T - t + 1.
+
+    Writes ``out`` (A, 7) the weighted terms (the values of :func:`severity`,
+    :func:`step_bound` and :func:`nmac_value` and the module docstring's table, each
+    computed as their numpy expressions compute it, so bit for bit the same),
+    ``nearest`` (A,) m to the nearest aircraft in loss of separation (inf: none) and
+    ``ended`` (A,) bool (NMAC, arrived or out of play). The row sums are left to numpy
+    (its pairwise summation order).
+    """
+    n = positions.shape[0]
+    near = np.full(n, np.inf)
+    for p in range(los_i.size):
+        i, j = los_i[p], los_j[p]
+        d = math.hypot(positions[i, 0] - positions[j, 0], positions[i, 1] - positions[j, 1])
+        if d < near[i]:
+            near[i] = d
+        if d < near[j]:
+            near[j] = d
+    w_los, w_nmac, w_conflict, w_heading = weights[0], weights[1], weights[2], weights[3]
+    w_progress, w_path, w_arrival = weights[4], weights[5], weights[6]
+    fixed = w_los + w_conflict + w_heading
+    any_nmac = False
+    for k in range(idx.size):
+        any_nmac = any_nmac or nmac[idx[k]]
+    left = max(float(steps_left), 0.0)
+    span = r_safe - nmac_distance
+    for k in range(idx.size):
+        i = idx[k]
+        L = planned[i]
+        has_route = L > 0
+        Ls = L if has_route else 1.0
+        travel = speeds[i] * dt / Ls if has_route else 0.0
+        turn = turn_rates[i] / max_rate[i] if turns[i] else 0.0
+        d = near[i]
+        nearest[k] = d
+        sev = (r_safe - d) / span
+        if sev < 0.0:  # np.clip(sev, 0.0, 1.0) as numpy clips to scalar bounds
+            sev = 0.0
+        elif sev > 1.0:
+            sev = 1.0
+        out[k, 0] = w_los * -sev
+        value = 0.0
+        if any_nmac and nmac[i]:
+            c_max = fixed + (w_progress + 2.0 * w_path) * travel
+            value = -(1.0 + left * c_max / w_nmac)
+        out[k, 1] = w_nmac * value
+        out[k, 2] = w_conflict * -(1.0 if conflict[i] else 0.0)
+        out[k, 3] = w_heading * -(turn * turn)
+        along = (covered[i] - covered_before[i]) / Ls
+        out[k, 4] = w_progress * (along if has_route else 0.0)
+        out[k, 5] = w_path * (along - travel if has_route else 0.0)
+        out[k, 6] = w_arrival * (1.0 if done[i] else 0.0)
+        ended[k] = nmac[i] or done[i] or not active[i]

@@ -220,6 +220,29 @@ def decode_action(agent: str, action, discrete: bool) -> float:
     return min(max(value, -1.0), 1.0)
 
 
+@njit(cache=True)
+def fractions_into(actions, out) -> bool:  # pragma: no cover - compiled
+    """``out`` (A,) float64 ← the continuous ``actions`` (A,) (any float dtype) clipped to
+    [-1, 1], as ``np.clip(actions.astype(np.float64), -1.0, 1.0)``; False (``out`` not
+    all written) if one is not finite, for :func:`decode_action` to report."""
+    for k in range(actions.size):
+        a = np.float64(actions[k])
+        if not np.isfinite(a):
+            return False
+        out[k] = -1.0 if a < -1.0 else (1.0 if a > 1.0 else a)
+    return True
+
+
+@njit(cache=True)
+def turn_rates_into(frac, idx, max_rate, rates):  # pragma: no cover - compiled
+    """``rates`` (N,) rad/s ← NaN (the built-in pilot), then ``frac[k] · max_rate[i]`` for
+    each acting agent ``k`` of aircraft ``i = idx[k]`` (``frac`` NaN: built-in too)."""
+    rates[:] = np.nan
+    for k in range(idx.size):
+        i = idx[k]
+        rates[i] = frac[k] * max_rate[i]
+
+
 def _show(value) -> str:
     """A one-line, bounded rendering of a bad value for an error message."""
     text = repr(value).replace("\n", " ")
@@ -303,6 +326,88 @@ def encode_intruders_batch(
         out,
     )
     return out
+
+
+def encode_intruders_into(
+    layout: ObservationLayout,
+    slot: np.ndarray,
+    own_pos: np.ndarray,
+    own_vel: np.ndarray,
+    heading: np.ndarray,
+    x: np.ndarray,
+    P: np.ndarray,
+    mu: np.ndarray,
+    obs: np.ndarray,
+) -> None:
+    """:func:`encode_intruders_batch` written into the intruder block of ``obs`` (A, size)
+    float64 (columns ``own_size`` on), every row of it (unused rows zero), in one numba
+    pass (:func:`_intruders_into`): the same values bit for bit. ``x`` (T, 5), ``P``
+    (T, 5, 5), ``mu`` (T, M) float64 C-contiguous (a :class:`~.trackers.TrackView`'s)."""
+    _intruders_into(
+        np.asarray(slot, dtype=np.int64),
+        np.ascontiguousarray(x, dtype=np.float64),
+        np.ascontiguousarray(P, dtype=np.float64),
+        np.ascontiguousarray(mu, dtype=np.float64),
+        own_pos,
+        own_vel,
+        heading,
+        layout.sensor_range,
+        layout.r_safe,
+        layout.lookahead,
+        layout.own_size,
+        layout.n_intruders,
+        obs,
+    )
+
+
+@njit(cache=True, error_model="numpy")
+def _intruders_into(
+    slot, x, P, mu, own_pos, own_vel, heading, rng_, r_safe, look, col0, K, obs
+):  # pragma: no cover - compiled
+    """:func:`encode_intruders_into`: zero the block, keep the tracks with finite
+    ``x[:, :4]``, order them by (ownship, ``hypot`` range, track row) as
+    :func:`encode_intruders_batch`'s ``lexsort`` does (a total order: the same rows),
+    then :func:`_encode_rows` into a (A, K, F) scratch copied into ``obs``."""
+    A = obs.shape[0]
+    F = (obs.shape[1] - col0) // K if K > 0 else 0
+    for a in range(A):
+        for c in range(col0, obs.shape[1]):
+            obs[a, c] = 0.0
+    T = x.shape[0]
+    if T == 0 or K == 0 or A == 0:
+        return
+    dist = np.empty(T)
+    order = np.empty(T, dtype=np.int64)
+    n = 0
+    for t in range(T):
+        if not (
+            math.isfinite(x[t, 0])
+            and math.isfinite(x[t, 1])
+            and math.isfinite(x[t, 2])
+            and math.isfinite(x[t, 3])
+        ):
+            continue
+        a = slot[t]
+        d = math.hypot(x[t, 0] - own_pos[a, 0], x[t, 2] - own_pos[a, 1])
+        dist[t] = d
+        # insertion by (slot, dist, t): t is larger than every row placed before it
+        k = n
+        while k > 0:
+            q = order[k - 1]
+            if slot[q] < a or (slot[q] == a and not (d < dist[q])):
+                break
+            order[k] = q
+            k -= 1
+        order[k] = t
+        n += 1
+    rows = np.zeros((A, K, F))
+    _encode_rows(
+        order[:n], slot, dist, x, P, mu, own_pos, own_vel, heading, rng_, r_safe, look, rows
+    )
+    for a in range(A):
+        for k in range(K):
+            for f in range(F):
+                obs[a, col0 + k * F + f] = rows[a, k, f]
 
 
 @njit(cache=True, error_model="numpy")
@@ -408,11 +513,28 @@ def encode_own_rows(
 
 
 def finish_in_place(layout: ObservationLayout, obs: np.ndarray) -> np.ndarray:
-    """:func:`finish` of a float64 buffer (..., size) that already holds both blocks:
-    NaN -> 0 and clipped in place; float32 (..., size)."""
-    obs[np.isnan(obs)] = 0.0
+    """:func:`finish` of a float64 buffer (A, size) that already holds both blocks:
+    NaN -> 0 and clipped into the bounds in one pass (:func:`_finish_rows`); float32
+    (A, size). ``obs`` is left as it was."""
     low, high = layout.bounds()
-    return np.clip(obs, low, high, out=obs).astype(np.float32)
+    out = np.empty(obs.shape, dtype=np.float32)
+    _finish_rows(obs, low, high, out)
+    return out
+
+
+@njit(cache=True)
+def _finish_rows(obs, low, high, out):  # pragma: no cover - compiled
+    """``out`` (A, F) float32 ← ``obs`` (A, F) with NaN -> 0, clipped to ``low``, ``high``
+    (F,) float32 as numpy's ``clip`` with array bounds does (``x > low ? x : low``, then
+    ``y < high ? y : high``: the same signed zeros), then rounded to float32."""
+    for r in range(obs.shape[0]):
+        for c in range(obs.shape[1]):
+            x = obs[r, c]
+            if x != x:
+                x = 0.0
+            lo, hi = np.float64(low[c]), np.float64(high[c])
+            x = x if x > lo else lo
+            out[r, c] = x if x < hi else hi
 
 
 def finish(layout: ObservationLayout, own: np.ndarray, intruders: np.ndarray) -> np.ndarray:

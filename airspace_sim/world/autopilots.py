@@ -11,9 +11,11 @@ index it. All angles radians CCW from east, distances metres, times seconds.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from airspace_sim.dynamics.markov import mode_cdf, next_modes
 from airspace_sim.dynamics.presets import Preset
@@ -21,6 +23,7 @@ from airspace_sim.geometry import wrap_angle
 from airspace_sim.parts import Autopilot, NoParams
 from airspace_sim.registry import register
 from airspace_sim.world import streams
+from airspace_sim.world.flight import clip_array_bounds, wrap
 
 
 @dataclass
@@ -62,6 +65,7 @@ class _Legs:
     length: np.ndarray  #: (k,) m
     hold: np.ndarray  #: (k,) bool, no waypoint ahead: hold the initial heading
     ahead: np.ndarray  #: (k,) bool, a waypoint ahead
+    tail: np.ndarray  #: (k,) m, route length from the target waypoint to the last one
 
 
 @register("autopilot", "straight")
@@ -128,6 +132,7 @@ class RouteAutopilot(Autopilot):
         self.modes = None
         self._rows = np.arange(n)
         self._no_waypoints = bool((self.count == 0).any())
+        self._every_row = bool(np.array_equal(m, self._rows))  # members are 0..k-1
         self._legs = None  # _Legs of the current index and done; see _target
         # (FlightState, (k,) rad) of the last desired_heading: turn_rate asks for it and the
         # world again with the same state object (a new one every phase)
@@ -139,7 +144,15 @@ class RouteAutopilot(Autopilot):
         self.__dict__.update(state)
         self._rows = np.arange(self.members.size)
         self._no_waypoints = bool((self.count == 0).any())
+        self._every_row = bool(np.array_equal(self.members, self._rows))
         self._legs = self._desired = None
+
+    def _positions(self, state) -> np.ndarray:
+        """(k, 2) m, the members' positions: the world's array itself when the members
+        are all its aircraft in order (the same values as the gather)."""
+        if self._every_row and state.positions.shape[0] == self._rows.size:
+            return state.positions
+        return state.positions[self.members]
 
     def _target(self):
         """``(target, leg start)`` (k, 2) m of each member's current leg. What depends only
@@ -157,6 +170,7 @@ class RouteAutopilot(Autopilot):
                 np.hypot(leg[:, 0], leg[:, 1]),
                 (self.count == 0) | self.done,
                 (self.count > 0) & ~self.done,
+                self.tail[self._rows, w],
             )
         return self._legs.target, self._legs.start
 
@@ -169,13 +183,48 @@ class RouteAutopilot(Autopilot):
         h = np.arctan2(d[:, 1], d[:, 0])
         out = np.where(self._legs.hold, self.heading0, h)
         out.flags.writeable = False
-        self._desired = (state, out)
+        self._desired = (state, out, None)
         return out
 
     def turn_rate(self, state):
-        return _toward(self.desired_heading(state), state, self.members)
+        return self.commands(state)[0]
+
+    def commands(self, state):
+        """``(turn_rate, desired_heading)`` (k,) rad/s and rad in one numba pass
+        (:func:`_route_turns`) after numpy's ``arctan2`` of the bearings: the values of
+        :meth:`desired_heading` and ``_toward`` bit for bit. The world reads both."""
+        last = self._desired
+        if last is not None and last[0] is state and last[2] is not None:
+            return last[2], last[1]
+        tgt, _ = self._target()
+        d = tgt - self._positions(state)
+        heading_to = np.arctan2(d[:, 1], d[:, 0])
+        desired = np.empty(self.members.size)
+        rate = np.empty(self.members.size)
+        _route_turns(
+            heading_to, self._legs.hold, self.heading0, self.members, state.headings,
+            state.max_turn_rate, state.dt, desired, rate,
+        )  # fmt: skip
+        desired.flags.writeable = False
+        self._desired = (state, desired, rate)
+        return rate, desired
 
     def after_step(self, state):
+        """Waypoint capture (the class docstring's rule), at most one waypoint per member
+        and step checked twice, in one numba pass (:func:`_capture`); returns (k,) bool
+        finished."""
+        index = self.index.copy()
+        if _capture(
+            state.positions, self.members, state.speeds, state.dt, self.wp, self.prev,
+            self.count, index, self.done,
+        ):  # fmt: skip
+            self.index = index
+            self._legs = self._desired = None
+        return self.done.copy()
+
+    def after_step_reference(self, state):
+        """:meth:`after_step` as numpy statements (the reference the kernel is tested
+        against)."""
         pos = state.positions[self.members]
         step_len = state.speeds[self.members] * state.dt
         for _ in range(2):  # a step can at most reach one waypoint; twice for safety
@@ -197,11 +246,15 @@ class RouteAutopilot(Autopilot):
     def _progress(self, pos):
         """:meth:`progress` at the members' positions ``pos`` (k, 2) m."""
         tgt, _ = self._target()
-        remaining = np.linalg.norm(tgt - pos, axis=1) + self.tail[self._rows, self._legs.w]
+        remaining = np.linalg.norm(tgt - pos, axis=1) + self._legs.tail
         out = np.where(self.done, self.planned, self.planned - remaining)
+        return self._progress_no_waypoints(pos, out)
+
+    def _progress_no_waypoints(self, pos, out):
+        """``out`` with the members without waypoints given their progress along the
+        initial heading, like "straight"."""
         if not self._no_waypoints:
             return out
-        # no waypoints: progress along the initial heading, like "straight"
         d = pos - self.start
         along = d[:, 0] * np.cos(self.heading0) + d[:, 1] * np.sin(self.heading0)
         return np.where(self.count == 0, along, out)
@@ -225,9 +278,21 @@ class RouteAutopilot(Autopilot):
 
     def route_state(self, state):
         """:meth:`route_geometry` and :meth:`progress` in one call (the env reads both
-        every step): ``(index, done, cross_track, bearing, distance, progress)``."""
-        pos = state.positions[self.members]
-        return self._route_geometry(pos) + (self._progress(pos),)
+        every step): ``(index, done, cross_track, bearing, distance, progress)``. One
+        numba pass (:func:`_route_state_rows`) after numpy's ``arctan2`` of the bearings;
+        the same values as :meth:`route_geometry` and :meth:`progress` bit for bit."""
+        pos = self._positions(state)
+        tgt, prev = self._target()
+        legs = self._legs
+        d = tgt - pos
+        bearing = np.arctan2(d[:, 1], d[:, 0])
+        out = np.empty((4, pos.shape[0]))
+        _route_state_rows(
+            pos, tgt, prev, legs.leg, legs.length, legs.ahead, legs.tail, self.planned,
+            self.done, bearing, out,
+        )  # fmt: skip
+        progress = self._progress_no_waypoints(pos, out[3])
+        return self.index.copy(), self.done.copy(), out[0], out[1], out[2], progress
 
     def _route_geometry(self, pos):
         """:meth:`route_geometry` at the members' positions ``pos`` (k, 2) m."""
@@ -248,6 +313,77 @@ class RouteAutopilot(Autopilot):
             np.where(ahead, bearing, 0.0),
             np.where(ahead, distance, np.nan),
         )
+
+
+@njit(cache=True)
+def _route_turns(
+    heading_to, hold, heading0, members, headings, max_rate, dt, desired, rate
+):  # pragma: no cover - compiled
+    """:meth:`RouteAutopilot.commands` of k members: ``desired`` (k,) rad ← ``heading0``
+    where ``hold`` else numpy's ``heading_to`` (bearing to the target), ``rate`` (k,) rad/s
+    ← ``clip(wrap(desired − heading) / dt, ±max_rate)`` (``_toward``); ``headings`` and
+    ``max_rate`` (N,) indexed by ``members``."""
+    for a in range(members.size):
+        i = members[a]
+        des = heading0[a] if hold[a] else heading_to[a]
+        desired[a] = des
+        rate[a] = clip_array_bounds(wrap(des - headings[i]) / dt, -max_rate[i], max_rate[i])
+
+
+@njit(cache=True)
+def _capture(pos, members, speeds, dt, wp, prev, count, index, done):  # pragma: no cover
+    """:meth:`RouteAutopilot.after_step_reference` of k members in one pass, ``index`` and
+    ``done`` (k,) updated in place: up to two captures per member, each ``|to_wp| ≤ speed·dt``
+    (the C library's ``hypot``, as numpy's) or ``to_wp · (target − leg start) < 0`` (two
+    products and one sum, as numpy's ``einsum`` of two terms). ``pos`` and ``speeds``
+    (N,) indexed by ``members``; ``wp``, ``prev`` (k, W, 2) m. Returns whether an index
+    moved."""
+    moved = False
+    W = wp.shape[1]
+    for a in range(members.size):
+        i = members[a]
+        step_len = speeds[i] * dt
+        for _ in range(2):
+            if done[a] or count[a] <= 0:
+                break
+            w = min(index[a], W - 1)
+            tx, ty = wp[a, w, 0], wp[a, w, 1]
+            dx, dy = tx - pos[i, 0], ty - pos[i, 1]
+            near = math.hypot(dx, dy) <= step_len
+            passed = dx * (tx - prev[a, w, 0]) + dy * (ty - prev[a, w, 1]) < 0.0
+            if not (near or passed):
+                break
+            index[a] += 1
+            moved = True
+            if index[a] >= count[a]:
+                done[a] = True
+    return moved
+
+
+@njit(cache=True)
+def _route_state_rows(
+    pos, target, start, leg, length, ahead, tail, planned, done, bearing, out
+):  # pragma: no cover - compiled
+    """:meth:`RouteAutopilot.route_state`'s rows of k members: ``out`` (4, k) ← cross-track
+    m, bearing rad, distance m, progress m, from the positions ``pos``, the legs' target,
+    start, vector (k, 2) m and length (k,) m, ``ahead`` and ``done`` (k,) bool, ``tail``
+    and ``planned`` (k,) m and numpy's ``bearing`` (k,) rad to the target. Each value as
+    :meth:`RouteAutopilot._route_geometry` and :meth:`RouteAutopilot._progress` compute it
+    (``hypot`` is the C library's in both; ``norm`` of two components is ``sqrt(x² + y²)``)."""
+    for a in range(pos.shape[0]):
+        dx, dy = target[a, 0] - pos[a, 0], target[a, 1] - pos[a, 1]
+        if ahead[a]:
+            if length[a] > 1e-9:
+                rx, ry = pos[a, 0] - start[a, 0], pos[a, 1] - start[a, 1]
+                out[0, a] = (leg[a, 0] * ry - leg[a, 1] * rx) / length[a]
+            else:
+                out[0, a] = 0.0
+            out[1, a] = bearing[a]
+            out[2, a] = math.hypot(dx, dy)
+        else:
+            out[0, a], out[1, a], out[2, a] = 0.0, 0.0, np.nan
+        remaining = math.sqrt(dx * dx + dy * dy) + tail[a]
+        out[3, a] = planned[a] if done[a] else planned[a] - remaining
 
 
 @register("autopilot", "markov")

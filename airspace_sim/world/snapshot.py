@@ -208,10 +208,18 @@ def live_tracks(world) -> Tracks:
     The only place that reads the world's track table; the env's observations read it
     here too.
     """
-    v = world.tracks.view()
+    table = world.tracks
+    v = table.view()
     arrays = (v.owner, v.intruder, v.x, v.P, v.mu, v.misses, v.age)
+    # the table's kept views are the same array objects while its track count holds
+    # (trackers.TrackView): the Tracks of the last call, if made of exactly these arrays
+    last = table.__dict__.get("_tracks_of_view")
+    if last is not None and all(a is b for a, b in zip(arrays, last[0])):
+        return last[1]
     if [a.dtype for a in arrays] == _TRACK_DTYPES and not any(a.flags.writeable for a in arrays):
-        return Tracks._of_view(*arrays)
+        tracks = Tracks._of_view(*arrays)
+        table._tracks_of_view = (arrays, tracks)
+        return tracks
     return Tracks(*arrays)
 
 

@@ -88,11 +88,15 @@ def _measurements_by_slot(Z, slot_of_det, z):
 
 
 @njit(cache=True)
-def _advance(live, owner, intruder, misses, age, slot_of_det, gated, scanned, drop_after, aircraft):
+def _advance(
+    live, owner, intruder, misses, age, slot_of_det, gated, scanned, drop_after, aircraft, out
+):  # pragma: no cover - compiled
     """One step of the per-slot bookkeeping (capacity,) arrays, in place: ``age`` + 1;
     on a scan ``misses`` + 1, reset to 0 for the slots detected (``slot_of_det`` ≥ 0)
     whose measurement the tracker used (not ``gated``, (capacity,) bool).
-    Returns the live slots to drop: too many misses, or owner or intruder gone."""
+    Writes the live slots to drop (too many misses, or owner or intruder gone) into
+    ``out`` (capacity,) and returns their number (an int, not an array: every array a
+    numba function returns costs a boxing and a ``_numba_unpickle`` call of its type)."""
     cap = live.size
     for s in range(cap):
         age[s] += 1
@@ -103,7 +107,6 @@ def _advance(live, owner, intruder, misses, age, slot_of_det, gated, scanned, dr
             s = slot_of_det[d]
             if s >= 0 and not gated[s]:
                 misses[s] = 0
-    out = np.empty(cap, dtype=np.int64)
     k = 0
     for s in range(cap):
         if live[s] and (
@@ -111,7 +114,7 @@ def _advance(live, owner, intruder, misses, age, slot_of_det, gated, scanned, dr
         ):
             out[k] = s
             k += 1
-    return out[:k]
+    return k
 
 
 def mode_names(preset: Preset) -> tuple[str, ...]:
@@ -236,32 +239,114 @@ class TrackView:
     """Read-only dense arrays over the live tracks of a :class:`TrackTable`, in slot order
     (``P`` live tracks): ``slots``, ``owner``, ``intruder``, ``misses``, ``age`` (steps
     since the track started) (P,) int; ``x`` (P, 5); ``mu`` (P, M); ``P`` (P, 5, 5),
-    gathered when first read. Valid until the table's next update."""
+    gathered when first read. Valid until the table's next update: for the built-in
+    trackers the arrays are views of buffers the table keeps and gathers into again at the
+    next :meth:`TrackTable.view` (:class:`_LiveTracks`, one numba pass), so a caller that
+    keeps them past an update copies them."""
 
-    __slots__ = ("slots", "owner", "intruder", "misses", "age", "x", "mu", "_tracker", "_P")
+    __slots__ = ("slots", "owner", "intruder", "misses", "age", "x", "mu", "_live", "_P")
 
     def __init__(self, table: TrackTable):
         t = table.tracker
-        s = np.flatnonzero(t.alive)
-        self.slots = _ro(s)
-        # (np.take: a row gather several times faster than fancy indexing)
-        self.owner = _ro(np.take(table._owner, s))
-        self.intruder = _ro(np.take(table._intruder, s))
-        self.misses = _ro(np.take(table._misses, s))
-        self.age = _ro(np.take(table._age, s))
-        self.x = _ro(np.take(t.x, s, axis=0))
-        self.mu = _ro(np.take(t.mu, s, axis=0))
-        self._tracker = t
         self._P = None
+        if type(t) in (ImmTracker, TruthTracker):  # float64 arrays of one capacity
+            self._live, fields = table._gather_live_view()
+        else:  # another tracker: numpy's gathers of whatever its arrays are
+            self._live = t
+            s = np.flatnonzero(t.alive)
+            # (np.take: a row gather several times faster than fancy indexing)
+            arrays = (table._owner, table._intruder, table._misses, table._age, t.x, t.mu)
+            fields = (_ro(s),) + tuple(_ro(np.take(a, s, axis=0)) for a in arrays)
+        (self.slots, self.owner, self.intruder, self.misses, self.age, self.x, self.mu) = fields
 
     @property
     def P(self) -> np.ndarray:
         if self._P is None:
-            self._P = _ro(np.take(self._tracker.P, self.slots, axis=0))
+            if isinstance(self._live, _LiveTracks):
+                self._P = self._live.gather_P()
+            else:
+                self._P = _ro(np.take(self._live.P, self.slots, axis=0))
         return self._P
 
     def __len__(self) -> int:
         return int(self.slots.size)
+
+
+@njit(cache=True)
+def _gather_live(alive, owner, intruder, misses, age, x, mu, o_slots, o_owner, o_intruder,
+                 o_misses, o_age, o_x, o_mu):  # fmt: skip  # pragma: no cover - compiled
+    """The live slots' rows of the (capacity,) bookkeeping and the tracker's ``x``, ``mu``
+    written densely into the ``o_`` buffers, in slot order; returns their number."""
+    k = 0
+    for s in range(alive.size):
+        if alive[s]:
+            o_slots[k] = s
+            o_owner[k] = owner[s]
+            o_intruder[k] = intruder[s]
+            o_misses[k] = misses[s]
+            o_age[k] = age[s]
+            for c in range(x.shape[1]):
+                o_x[k, c] = x[s, c]
+            for m in range(mu.shape[1]):
+                o_mu[k, m] = mu[s, m]
+            k += 1
+    return k
+
+
+@njit(cache=True)
+def _gather_rows3(P, slots, out):  # pragma: no cover - compiled
+    """``out[k] = P[slots[k]]`` for (S, a, b) ``P``."""
+    for k in range(slots.size):
+        s = slots[k]
+        for a in range(P.shape[1]):
+            for b in range(P.shape[2]):
+                out[k, a, b] = P[s, a, b]
+
+
+class _LiveTracks:
+    """The buffers a :class:`TrackTable`'s views are gathered into, kept across updates
+    (one numba pass per view instead of a gather and a read-only wrapper per array), with
+    the read-only views of their first ``P`` rows kept while ``P`` does not change."""
+
+    def __init__(self, capacity: int, n_modes: int):
+        self.capacity = capacity
+        self.n_modes = n_modes
+        i64 = np.int64
+        self.arrays = (
+            np.empty(capacity, i64),
+            np.empty(capacity, i64),
+            np.empty(capacity, i64),
+            np.empty(capacity, i64),
+            np.empty(capacity, i64),
+            np.empty((capacity, 5)),
+            np.empty((capacity, n_modes)),
+        )
+        self.P_buf = np.empty((capacity, 5, 5))
+        self.count = -1
+        self.views = None
+        self.P_view = None
+        self.tracker = None
+
+    def gather(self, table: TrackTable, alive, x, mu):
+        """``(slots, owner, intruder, misses, age, x, mu)`` of the live tracks, read-only
+        views of the buffers, gathered now from the table and its tracker's ``alive``,
+        ``x``, ``mu``."""
+        self.tracker = table.tracker
+        if not (alive.shape[0] == x.shape[0] == mu.shape[0] == self.capacity):
+            raise ValueError("track views: the tracker's arrays are not of its capacity")
+        k = _gather_live(
+            alive, table._owner, table._intruder, table._misses, table._age, x, mu,
+            *self.arrays,
+        )  # fmt: skip
+        if k != self.count:
+            self.count = k
+            self.views = tuple(_ro(a[:k]) for a in self.arrays)
+            self.P_view = _ro(self.P_buf[:k])
+        return self.views
+
+    def gather_P(self) -> np.ndarray:
+        _gather_rows3(self.tracker.P, self.views[0], self.P_buf)
+        return self.P_view
 
 
 class TrackTable:
@@ -276,6 +361,8 @@ class TrackTable:
     # ``gated`` of a tracker that never gates, resized by :meth:`update`; the class default
     # serves tables pickled before it existed (checkpoints)
     _no_gate = np.zeros(0, dtype=np.bool_)
+    # the slots :func:`_advance` drops, resized by :meth:`update` (class default: as above)
+    _drop_buf = np.zeros(0, dtype=np.int64)
 
     def __init__(
         self,
@@ -353,6 +440,27 @@ class TrackTable:
             self._view = TrackView(self)
         return self._view
 
+    def _gather_live_view(self):
+        """``(buffers, fields)``: the view buffers (:class:`_LiveTracks`, (re)made for the
+        tracker's capacity and modes) and the live tracks gathered into them."""
+        t = self.tracker
+        alive, x, mu = t.alive, t.x, t.mu
+        cap, m = mu.shape
+        live = self.__dict__.get("_live")
+        if live is None or live.capacity != cap or live.n_modes != m:
+            live = self._live = _LiveTracks(cap, m)
+        return live, live.gather(self, alive, x, mu)
+
+    def __getstate__(self) -> dict:
+        """The table without its view and view buffers (derived state: pickled arrays are
+        no longer views of the buffers), made again at the next :meth:`view`."""
+        state = self.__dict__.copy()
+        state.pop("_live", None)
+        state.pop("_tracks_of_view", None)  # snapshot.live_tracks' of the kept views
+        state.pop("_drop_buf", None)  # scratch
+        state["_view"] = None
+        return state
+
     # ----------------------------------------------------------------- update
     def update(
         self, time: float, scanned: bool, det_owner, det_intruder, z, alive, truth_states=None
@@ -386,13 +494,15 @@ class TrackTable:
                 if self._no_gate.size != cap:
                     self._no_gate = np.zeros(cap, dtype=np.bool_)
                 gated = self._no_gate
-            drop = _advance(
+            if self._drop_buf.size != cap:
+                self._drop_buf = np.empty(cap, dtype=np.int64)
+            n_drop = _advance(
                 np.asarray(t.alive), self._owner, self._intruder, self._misses, self._age,
                 slot_of_det, gated, bool(scanned), self.drop_after,
-                np.asarray(alive, dtype=np.bool_),
+                np.asarray(alive, dtype=np.bool_), self._drop_buf,
             )  # fmt: skip
-            if drop.size:
-                self._drop(drop)
+            if n_drop:
+                self._drop(self._drop_buf[:n_drop].copy())
         # 3. births
         new = slot_of_det < 0
         if new.any():

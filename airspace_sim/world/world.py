@@ -43,9 +43,9 @@ from airspace_sim import registry
 from airspace_sim.dynamics import presets
 from airspace_sim.errors import UserError
 from airspace_sim.geometry import wrap_angle
+from airspace_sim.world import flight, streams
 from airspace_sim.world import snapshot as snapshots
-from airspace_sim.world import streams
-from airspace_sim.world.autopilots import AutopilotContext, FlightState
+from airspace_sim.world.autopilots import AutopilotContext, FlightState, RouteAutopilot
 from airspace_sim.world.bodies import LOS, NMAC, RANGE, Airspace
 from airspace_sim.world.metrics import WorldMetrics
 from airspace_sim.world.policy import AvoidancePolicy
@@ -127,6 +127,7 @@ class World:
             specs = [self.specs[i] for i in members]
             ap = registry.build("autopilot", name, members, specs, ctx, params=None)
             self.autopilots.append((members, ap))
+        self._one_route = self._only_route(self.autopilots, n)
         self.modes = np.full(n, -1, dtype=np.int64)
         self._has_plan = np.zeros(n, dtype=bool)
         for members, ap in self.autopilots:
@@ -176,6 +177,18 @@ class World:
         if "_traffic_mode_names" not in state:
             state["_traffic_mode_names"] = mode_names(state["pilot_preset"])
         self.__dict__.update(state)
+        if "_one_route" not in state:
+            self._one_route = self._only_route(self.autopilots, self.n)
+
+    @staticmethod
+    def _only_route(autopilots, n):
+        """The route autopilot when it alone flies every aircraft, in order (then the
+        commands and captures need no gather or scatter per group), else None."""
+        if len(autopilots) == 1:
+            members, ap = autopilots[0]
+            if type(ap) is RouteAutopilot and np.array_equal(members, np.arange(n)):
+                return ap
+        return None
 
     # ------------------------------------------------------------ read-only
     @property
@@ -225,34 +238,63 @@ class World:
         """Phase 1: (N,) turn rates, rad/s, clipped to the limits (0 for inactive)."""
         n = self.n
         state = self.flight_state()
-        rate = np.zeros(n)
-        desired = np.full(n, np.nan)
-        for members, ap in self.autopilots:
-            rate[members] = ap.turn_rate(state)
-            desired[members] = ap.desired_heading(state)
+        if self._one_route is not None:  # one route autopilot flies everyone, in order
+            rate, desired = self._one_route.commands(state)
+        else:
+            rate = np.zeros(n)
+            desired = np.full(n, np.nan)
+            for members, ap in self.autopilots:
+                rate[members] = ap.turn_rate(state)
+                desired[members] = ap.desired_heading(state)
         self._read_modes()
-        agent = np.zeros(n, dtype=bool)  # RL agents whose command is flown this step
+        # agent: RL agents whose command is flown this step; an avoiding agent that leaves
+        # a step to the built-in pilot flies the resolver too (avoid); recorded (kinematic)
+        # aircraft never do: they fly their recording
+        agent, avoid = np.empty(n, dtype=bool), np.empty(n, dtype=bool)
+        hr = rate
         if heading_rate is not None:
             hr = np.asarray(heading_rate, dtype=float).reshape(-1)
             if hr.shape != (n,):
                 raise UserError(f"heading_rate: expected shape ({n},), got {hr.shape}")
-            if np.isinf(hr).any():
+            if flight.agent_masks(hr, self.controlled, self.avoid, self.moved, agent, avoid):
                 raise UserError("heading_rate: contains an infinite value (use NaN for 'built-in')")
-            agent = self.controlled & np.isfinite(hr)
-        # an avoiding agent that leaves a step to the built-in pilot flies the resolver too;
-        # recorded (kinematic) aircraft never do: they fly their recording
-        avoid = self.avoid & ~self.moved & ~agent if self.controlled.any() else None
+        else:
+            agent[:] = False
+            np.logical_and(self.avoid, ~self.moved, out=avoid)
+        if not self.controlled.any():
+            avoid = None
         rate = self.policy.override(
             rate, desired, self.active, self.velocities, self.max_turn_rate * self.dt, avoid
         )
-        if agent.any():
-            rate = np.where(agent, hr, rate)
-        rate = np.clip(rate, -self.max_turn_rate, self.max_turn_rate)
-        rate[~self.active] = 0.0
-        return rate
+        out = np.empty(n)
+        flight.turn_commands(rate, hr, agent, self.max_turn_rate, self.active, out)
+        return out
 
     def _motion(self, rate) -> None:
         """Phase 2: fly the chord of each arc for ``dt``; finished route aircraft leave."""
+        dt = self.dt
+        if self._kinematic:
+            self._motion_kinematic(rate)
+            return
+        n = self.n
+        turn, mid, y = np.empty(n), np.empty(n), np.empty(n)
+        flight.arc_terms(rate, self.headings, dt, turn, mid, y)
+        # np.sinc(turn / 2π) as numpy computes it (sin(πx)/(πx), eps at 0), numpy's sin and cos
+        v, headings, flown = np.empty((n, 2)), np.empty(n), np.empty(n)
+        flight.chords(
+            self.speeds, np.sin(y), y, np.cos(mid), np.sin(mid), self.active, self.headings,
+            turn, dt, v, headings, flown,
+        )  # fmt: skip
+        self.airspace.set_velocities(v)
+        self.airspace.step(dt, self.positions)
+        self.headings = headings
+        self.turn_rates = rate
+        self.metrics_acc.motion(flown, turn, self.policy.following)
+        self._after_motion()
+
+    def _motion_kinematic(self, rate) -> None:
+        """:meth:`_motion` of a world with kinematic autopilots (recorded traffic), whose
+        aircraft fly their own velocities over the step."""
         dt = self.dt
         turn = rate * dt
         mid = self.headings + 0.5 * turn
@@ -263,8 +305,7 @@ class World:
         v = np.empty((self.n, 2))
         np.multiply(chord, np.cos(mid), out=v[:, 0])
         np.multiply(chord, np.sin(mid), out=v[:, 1])
-        if self._kinematic:
-            v, turn, rate = self._kinematic_motion(v, turn, rate)
+        v, turn, rate = self._kinematic_motion(v, turn, rate)
         v[~self.active] = 0.0
         self.airspace.set_velocities(v)
         self.airspace.step(dt, self.positions)
@@ -273,12 +314,20 @@ class World:
         self.metrics_acc.motion(
             np.where(self.active, self.speeds * dt, 0.0), turn, self.policy.following
         )
+        self._after_motion()
+
+    def _after_motion(self) -> None:
+        """The end of phase 2: time, waypoint captures (finished aircraft leave), recorded
+        traffic's arrivals and departures, velocities and contact flags."""
         self.step_count += 1
-        self.time = self.step_count * dt
+        self.time = self.step_count * self.dt
         state = self.flight_state()
-        finished = np.zeros(self.n, dtype=bool)
-        for members, ap in self.autopilots:
-            finished[members] = ap.after_step(state)
+        if self._one_route is not None:
+            finished = self._one_route.after_step(state)
+        else:
+            finished = np.zeros(self.n, dtype=bool)
+            for members, ap in self.autopilots:
+                finished[members] = ap.after_step(state)
         gone = finished & self.active
         if gone.any():
             self.metrics_acc.finished(self.time, gone)
@@ -330,11 +379,8 @@ class World:
 
     def _update_contact_flags(self) -> None:
         """``in_los`` and ``nmac`` (N,) from the airspace's pair sets."""
-        for kind, flag in ((LOS, self.in_los), (NMAC, self.nmac)):
-            i, j = self.airspace.pair_arrays(kind)
-            flag[:] = False
-            flag[i] = True
-            flag[j] = True
+        flight.pair_flags(*self.airspace.pair_arrays(LOS), self.in_los)
+        flight.pair_flags(*self.airspace.pair_arrays(NMAC), self.nmac)
 
     def _surveillance(self):
         """Phase 3: ``(scanned, owner (D,), intruder (D,), z (D, 2) m)`` of this step."""
@@ -382,9 +428,9 @@ class World:
     def _velocities(self) -> np.ndarray:
         """(N, 2) m/s from speeds and headings (0 for aircraft that left)."""
         v = np.empty((self.n, 2))
-        np.multiply(self.speeds, np.cos(self.headings), out=v[:, 0])
-        np.multiply(self.speeds, np.sin(self.headings), out=v[:, 1])
-        v[~self.active] = 0.0
+        flight.velocity_rows(
+            self.speeds, np.cos(self.headings), np.sin(self.headings), self.active, v
+        )
         return v
 
     def _truth_for_tracker(self):
