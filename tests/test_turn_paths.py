@@ -4,7 +4,7 @@ turning intruder and a closed-form full circle."""
 import numpy as np
 import pytest
 
-from airspace_sim.avoidance.turn_paths import turned_path_min_ratio
+from airspace_sim.avoidance.turn_paths import turned_path_min_ratio, turned_path_min_ratio_numpy
 
 
 def _integrated_min(vo, r, vi, psi, radius, T, w, turn_s, step):
@@ -96,3 +96,20 @@ def test_zero_turn_time_is_the_straight_path():
     )
     np.testing.assert_array_equal(got[:, :, 1], got[:, :, 0])
     np.testing.assert_array_equal(got[:, :, 2], got[:, :, 0])
+
+
+def test_the_kernel_matches_the_numpy_reference():
+    rng = np.random.default_rng(13)
+    n, k = 40, 7
+    vo = rng.uniform(-250, 250, (n, 2))
+    r = rng.uniform(-30000, 30000, (n, k, 2))
+    v = rng.uniform(-450, 450, (n, k, 2))
+    valid = rng.random((n, k)) < 0.7
+    psi = rng.uniform(-0.1, 0.1, (n, 4))
+    radius = rng.uniform(3000, 8000, n)
+    w = np.radians(rng.uniform(0.0, 4.0, n))  # 0 included: the straight limit
+    w[0] = 0.0
+    args = (vo, r, v, valid, psi, radius, 120.0, w, 30.0)
+    got, want = turned_path_min_ratio(*args), turned_path_min_ratio_numpy(*args)
+    assert np.isinf(got[~valid]).all() and np.isinf(want[~valid]).all()
+    np.testing.assert_allclose(got[valid], want[valid], rtol=1e-12)

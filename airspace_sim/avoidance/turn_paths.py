@@ -18,13 +18,16 @@ Distances m, velocities m/s, times s, angles rad CCW positive.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from numba import njit
 
 #: the three intruder hypotheses, in the order of the ``M`` axis
 HYPOTHESES = ("straight", "left", "right")
 
 
-def turned_path_min_ratio(
+def turned_path_min_ratio_numpy(
     own_velocity,
     rel_position,
     rel_velocity,
@@ -36,7 +39,9 @@ def turned_path_min_ratio(
     turn_s: float,
     step_s: float = 2.0,
 ):
-    """(N, K, 3, C) minimum over the sampled look-ahead of the distance to intruder k, over
+    """:func:`turned_path_min_ratio` in numpy over (N, K, S) arrays (the kernel's reference).
+
+    (N, K, 3, C) minimum over the sampled look-ahead of the distance to intruder k, over
     ``radius``, under each of :data:`HYPOTHESES`, the ownship turned by candidate c.
 
     own_velocity (N, 2) m/s; rel_position, rel_velocity (N, K, 2) m, m/s (intruder minus
@@ -80,3 +85,79 @@ def turned_path_min_ratio(
             out[:, :, m, j] = np.hypot(dx, dy).min(axis=-1, initial=np.inf)
     out /= radius[:, None, None, None]
     return np.where(np.asarray(valid, dtype=bool)[:, :, None, None], out, np.inf)
+
+
+def _sample_times(lookahead_s: float, step_s: float) -> np.ndarray:
+    return np.unique(np.append(np.arange(0.0, lookahead_s, step_s), lookahead_s))
+
+
+def turned_path_min_ratio(
+    own_velocity,
+    rel_position,
+    rel_velocity,
+    valid,
+    candidates,
+    radius,
+    lookahead_s: float,
+    turn_rate,
+    turn_s: float,
+    step_s: float = 2.0,
+):
+    """(N, K, 3, C) minimum over the sampled look-ahead of the distance to intruder k, over
+    ``radius``, under each of :data:`HYPOTHESES`, the ownship turned by candidate c (a numba
+    kernel, one pass without temporaries; the arguments and result of
+    :func:`turned_path_min_ratio_numpy`, the reference it is tested against)."""
+    vo = np.ascontiguousarray(own_velocity, dtype=float)
+    n, k = np.shape(valid)
+    return _turned_kernel(
+        vo,
+        np.ascontiguousarray(rel_position, dtype=float),
+        np.ascontiguousarray(rel_velocity, dtype=float),
+        np.ascontiguousarray(valid, dtype=np.bool_),
+        np.ascontiguousarray(candidates, dtype=float),
+        np.ascontiguousarray(np.broadcast_to(np.asarray(radius, dtype=float), (n,))),
+        np.ascontiguousarray(
+            np.maximum(np.broadcast_to(np.asarray(turn_rate, dtype=float), (n,)), 1e-12)
+        ),
+        _sample_times(float(lookahead_s), float(step_s)),
+        float(turn_s),
+    )
+
+
+@njit(cache=True)
+def _turned_kernel(vo, r, v, valid, psi, radius, w, t, turn_s):
+    n, k = valid.shape
+    c_n = psi.shape[1]
+    out = np.full((n, k, 3, c_n), np.inf)
+    for a in range(n):
+        for j in range(c_n):
+            cp, sp = math.cos(psi[a, j]), math.sin(psi[a, j])
+            ovx = cp * vo[a, 0] - sp * vo[a, 1]
+            ovy = sp * vo[a, 0] + cp * vo[a, 1]
+            for b in range(k):
+                if not valid[a, b]:
+                    continue
+                vx = v[a, b, 0] + vo[a, 0]
+                vy = v[a, b, 1] + vo[a, 1]
+                for m in range(3):
+                    sign = 0.0 if m == 0 else (1.0 if m == 1 else -1.0)
+                    ww = sign * w[a]
+                    best = np.inf
+                    for i in range(t.size):
+                        ti = t[i]
+                        if m == 0:
+                            dx, dy = vx * ti, vy * ti
+                        else:
+                            tau = min(ti, turn_s)
+                            ang = ww * tau
+                            c, s = math.cos(ang), math.sin(ang)
+                            rest = ti - tau
+                            dx = (s * vx - (1.0 - c) * vy) / ww + (c * vx - s * vy) * rest
+                            dy = (s * vy + (1.0 - c) * vx) / ww + (s * vx + c * vy) * rest
+                        ex = r[a, b, 0] + dx - ovx * ti
+                        ey = r[a, b, 1] + dy - ovy * ti
+                        d = math.sqrt(ex * ex + ey * ey)
+                        if d < best:
+                            best = d
+                    out[a, b, m, j] = best / radius[a]
+    return out

@@ -85,24 +85,15 @@ class ResolverSpec:
     #: radius, else the heading is held), "partial" (the largest of 1, 1/2, 1/4 of the turn
     #: that clears it), "no-worse" (the largest that clears r_safe·(1 + margin) and brings no
     #: intruder closer within that radius than holding would), "diverging" (the largest that
-    #: clears r_safe·(1 + margin) and keeps each intruder outside that radius or diverging)
+    #: clears r_safe·(1 + margin) and keeps each intruder outside that radius or diverging),
+    #: "no-worse-turns" ("no-worse", also against each intruder turning left or right)
     resume_rule: str = "hold"
-    #: rules other than "hold": an intruder whose track's turn probability (1 − the IMM's
-    #: straight-mode probability) is at least this must stay outside
-    #: r_safe·(1 + margin + resume_margin) after the turn back, as under "hold" (unset: off)
-    resume_turning_p: float | None = None
-    #: rules other than "hold": an ownship with at least this many intruders inside
-    #: r_safe·(1 + margin + resume_margin) judges its turn back as "hold" does (unset: off)
-    resume_crowd: int | None = None
     #: "no-worse-turns": seconds an intruder is assumed to keep turning (left or right, at
     #: the ownship's turn limit) before flying straight again
-    resume_turn_s: float = 30.0
-    #: rules other than "hold": seconds off the route during which the turn back is still
-    #: judged as "hold" does; the rule applies after (0: from the start)
-    resume_rule_after_s: float = 0.0
-    #: seconds a turn back that was refused outright (held) stays refused before the
-    #: ownship asks again (0: every step)
-    resume_refused_hold_s: float = 0.0
+    resume_turn_s: float = 60.0
+    #: "no-worse-turns": true lets a turn back bring an intruder's turned path closer as
+    #: long as it stays outside r_safe·(1 + margin) (false: outside the resume radius)
+    resume_turn_clear: bool = False
     #: "bands-probabilistic": seconds over which each intruder mode's prediction is judged
     #: (unset: the look-ahead), at this many evenly spaced times
     probability_horizon_s: float | None = None

@@ -15,7 +15,8 @@ reaches into it:
   the turn side is committed.
 
 Policy knobs live in ``scenario.resolver`` (``search_deg``, ``turn_preference``,
-``confirm_s``, ``resume_margin``, ``resume_decay_s``, ``resume_rule``, ``side_memory_s``,
+``confirm_s``, ``resume_margin``, ``resume_decay_s``, ``resume_rule``, ``resume_turn_s``,
+``resume_turn_clear``, ``side_memory_s``,
 ``probability_horizon_s``, ``probability_samples``); why they have the values they have is
 in ``docs/tuning.md``.
 """
@@ -85,13 +86,8 @@ class AvoidancePolicy:
         self.resume_margin = float(spec.resume_margin)
         self.resume_decay_s = None if spec.resume_decay_s is None else float(spec.resume_decay_s)
         self.resume_rule = spec.resume_rule
-        self.resume_turning_p = (
-            None if spec.resume_turning_p is None else float(spec.resume_turning_p)
-        )
-        self.rule_after_s = float(spec.resume_rule_after_s)
         self.resume_turn_s = float(spec.resume_turn_s)
-        self.resume_crowd = None if spec.resume_crowd is None else int(spec.resume_crowd)
-        self.refused_hold_steps = math.ceil(float(spec.resume_refused_hold_s) / dt - 1e-9)
+        self.resume_turn_clear = bool(spec.resume_turn_clear)
         self.confirm_steps = math.ceil(float(spec.confirm_s) / dt - 1e-9)
         self.preference = spec.turn_preference
         self.memory_steps = max(math.ceil(float(spec.side_memory_s) / dt - 1e-9), 1)
@@ -114,10 +110,6 @@ class AvoidancePolicy:
         self.following = np.zeros(n, dtype=bool)
         self._clear_for = np.zeros(n, dtype=np.int64)
         self._encounters = Encounters.empty()
-        #: (n_own, K) turn probability of each of ``_encounters``' tracks (NaN: unknown)
-        self._turn_p = np.zeros((0, 0))
-        #: steps each aircraft keeps holding after a refused turn back before asking again
-        self._refused_left = np.zeros(n, dtype=np.int64)
 
     # ------------------------------------------------------------- commands
     def override(self, rate, desired, active, velocities, max_heading_change, avoid=None):
@@ -147,18 +139,8 @@ class AvoidancePolicy:
                 & (np.abs(rate) * self.dt > TURN_TOLERANCE)
             )
             enc = self._encounters
-            if self.refused_hold_steps:
-                # hysteresis: a refused turn back stays refused for refused_hold_s
-                wait = resuming & (self._refused_left > 0)
-                out[wait] = 0.0
-                follow[wait] = True
-                self._refused_left[wait] -= 1
-                asking = resuming & ~wait
-            else:
-                asking = resuming
-            if asking.any() and enc.owners.size:
-                mask = asking[enc.owners]
-                sub = enc.subset(mask)
+            if resuming.any() and enc.owners.size:
+                sub = enc.subset(resuming[enc.owners])
                 if sub.owners.size:
                     turn = rate[sub.owners] * self.dt
                     if self.resume_rule == "hold":
@@ -167,17 +149,11 @@ class AvoidancePolicy:
                         out[hold] = 0.0
                         follow[hold] = True
                     else:
-                        turn_p = self._turn_p[mask] if self._turn_p.shape[0] else None
-                        frac = self._resume_fraction(
-                            sub, velocities, turn, max_heading_change, turn_p
-                        )
+                        frac = self._resume_fraction(sub, velocities, turn, max_heading_change)
                         part = frac < 1.0
                         cut = sub.owners[part]
                         out[cut] = np.where(frac[part] > 0.0, rate[cut] * frac[part], 0.0)
                         follow[cut] = True
-                        hold = sub.owners[frac == 0.0]
-                    if self.refused_hold_steps:
-                        self._refused_left[hold] = self.refused_hold_steps - 1
         self.following = follow
         if anyone:
             self.off_route_s = np.where(follow | resuming, self.off_route_s + self.dt, 0.0)
@@ -207,7 +183,7 @@ class AvoidancePolicy:
         )
         return np.asarray(clear, dtype=bool)
 
-    def _resume_fraction(self, enc: Encounters, velocities, turn, max_heading_change, turn_p=None):
+    def _resume_fraction(self, enc: Encounters, velocities, turn, max_heading_change):
         """(n_own,) fraction of the turn back ``turn`` (n_own,) rad, clipped to
         ``max_heading_change``, that enc's ownships fly under ``resume_rule`` (the largest
         of :data:`RESUME_FRACTIONS` that passes; 0 holds the heading).
@@ -229,14 +205,7 @@ class AvoidancePolicy:
           ``resume_turn_s`` (then straight), sampled every 2 s
           (:func:`~airspace_sim.avoidance.turn_paths.turned_path_min_ratio`): a neighbour
           that begins an avoidance turn now must not find the ownship closer than holding
-          would have left it.
-
-        Two guards for those two rules (``resolver.resume_turning_p``, ``resume_crowd``):
-        an intruder whose turn probability ``turn_p`` (n_own, K) is at least
-        ``resume_turning_p`` must have ρ_k(ψ) ≥ 1 (a turning intruder's straight prediction
-        is not trusted inside R1); an ownship with at least ``resume_crowd`` intruders
-        inside R1 now needs every ρ_k(ψ) ≥ 1 (the "hold" test); so does one that has been
-        off the route for less than ``resume_rule_after_s``.
+          would have left it (capped at R1, or at R0 with ``resume_turn_clear``).
         """
         vo = velocities[enc.owners]
         mx = max_heading_change[enc.owners]
@@ -267,18 +236,6 @@ class AvoidancePolicy:
                 now = np.hypot(enc.rel_position[..., 0], enc.rel_position[..., 1])
                 now = now[:, :, None] / radius[:, :, None] * (1.0 - DIVERGING_TOLERANCE)
                 floor = np.minimum(now, 1.0 - CLEAR_TOLERANCE)
-            if self.resume_turning_p is not None and turn_p is not None:
-                # NaN (no mode estimate) is never >= p: such tracks count as straight
-                turning = (turn_p >= self.resume_turning_p) & enc.valid
-                floor = np.where(turning[:, :, None], 1.0 - CLEAR_TOLERANCE, floor)
-            if self.rule_after_s > 0.0:
-                early = self.off_route_s[enc.owners] < self.rule_after_s
-                floor = np.where(early[:, None, None], 1.0 - CLEAR_TOLERANCE, floor)
-            if self.resume_crowd is not None:
-                now = np.hypot(enc.rel_position[..., 0], enc.rel_position[..., 1])
-                inside = ((now < radius) & enc.valid).sum(axis=1)
-                crowded = inside >= self.resume_crowd
-                floor = np.where(crowded[:, None, None], 1.0 - CLEAR_TOLERANCE, floor)
             ok = no_conflict & (pair >= floor).all(axis=1)
             if self.resume_rule == "no-worse-turns":
                 # the same judgement against each intruder turning left or right at the
@@ -294,7 +251,9 @@ class AvoidancePolicy:
                     mx / self.dt,
                     self.resume_turn_s,
                 )
-                worse = paths < np.minimum(paths[..., -1:], 1.0 - CLEAR_TOLERANCE)
+                # capped at "hold"'s R1, or with resume_turn_clear at the clear radius R0
+                cap = (base / wide)[:, None, None, None] if self.resume_turn_clear else 1.0
+                worse = paths < np.minimum(paths[..., -1:], cap - CLEAR_TOLERANCE)
                 ok &= ~worse.any(axis=(1, 2))
         else:
             ratio = cpa_min_ratio(
@@ -317,8 +276,6 @@ class AvoidancePolicy:
         ok = view.age >= self.confirm_steps  # a two-point track's first velocities are poor
         enc = gather(view.owner, view.x, positions, velocities, self.tracking & active, keep=ok)
         self._encounters = enc
-        if self.resume_turning_p is not None and self.resume_rule != "hold":
-            self._turn_p = turn_probability(tracks, view, enc)
         advice = np.zeros(n)
         conflict = np.zeros(n, dtype=bool)
         res = self.resolver
@@ -489,20 +446,6 @@ def commit_reference(preference, psi, conflict, side, cand, first_clear, best_bl
     else:
         new_side = np.where(kept & ~has_s, np.sign(psi), new_side)
     return psi, np.where(conflict, new_side, side)
-
-
-def turn_probability(tracks, view, enc: Encounters) -> np.ndarray:
-    """(n_own, K) probability that each track of ``enc`` is turning: 1 − the IMM's
-    probability of the mode named "straight"; NaN for unused slots, for trackers without
-    such a mode and for tracks without mode estimates (the truth tracker's μ is NaN)."""
-    out = np.full(enc.valid.shape, np.nan)
-    names = tuple(tracks.mode_names)
-    if "straight" not in names or not enc.valid.any():
-        return out
-    i = names.index("straight")
-    oi, ki = np.nonzero(enc.valid)
-    out[oi, ki] = 1.0 - view.mu[enc.rows[oi, ki], i]
-    return out
 
 
 def mode_predictions(
