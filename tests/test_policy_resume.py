@@ -141,3 +141,91 @@ def test_resume_rule_default_and_validation():
     msg = str(info.value)
     assert "\n" not in msg and "resolver.resume_rule" in msg and "sideways" in msg
     assert "hold, partial, no-worse" in msg
+
+
+def _integrated_turning_min(vo, r, vi, psi, w, turn_s, T=LOOKAHEAD_S, step=2.0, h=0.01):
+    """(2,) min distance, m, on the grid t = 0, 2, ..., T with the intruder turning left and
+    right at w rad/s for turn_s s then straight (heading integrated, midpoint rule), the
+    ownship turned by psi and straight: the oracle of "no-worse-turns"."""
+    n = int(round(T / h))
+    tt = np.arange(n) * h + h / 2
+    c, s = np.cos(psi), np.sin(psi)
+    own = np.array([c * vo[0] - s * vo[1], s * vo[0] + c * vo[1]])
+    grid = np.rint(np.unique(np.append(np.arange(0.0, T, step), T)) / h).astype(int)
+    out = []
+    for sign in (1.0, -1.0):
+        a = sign * w * np.minimum(tt, turn_s)
+        px = np.concatenate([[0.0], np.cumsum((np.cos(a) * vi[0] - np.sin(a) * vi[1]) * h)])
+        py = np.concatenate([[0.0], np.cumsum((np.sin(a) * vi[0] + np.cos(a) * vi[1]) * h)])
+        t = grid * h
+        out.append(np.hypot(r[0] + px[grid] - own[0] * t, r[1] + py[grid] - own[1] * t).min())
+    return np.array(out)
+
+
+def test_no_worse_turns_by_brute_force():
+    # "no-worse" on the straight prediction, and again against each intruder turning left
+    # and right at 3 deg/s for 30 s: no turned path comes closer (capped at R1) than holding.
+    rng = np.random.default_rng(21)
+    n, k = 80, 2
+    vo = rng.uniform(-250, 250, (n, 2))
+    r = rng.uniform(-12000, 12000, (n, k, 2))
+    v = rng.uniform(-400, 400, (n, k, 2))
+    valid = rng.random((n, k)) < 0.9
+    turn = rng.uniform(-0.06, 0.06, n)
+    pol = _policy("no-worse-turns", n)
+    assert pol.resume_turn_s == 60.0  # the default
+    pol.resume_turn_s = 30.0
+    w = np.radians(3.0)
+    enc = Encounters(np.arange(n), np.zeros((n, k), np.int64), r, v, valid)
+    got = pol._resume_fraction(enc, vo, turn, np.full(n, w))
+    plain = _policy("no-worse", n)._resume_fraction(enc, vo, turn, np.full(n, w))
+    checked = 0
+    for i in range(n):
+        sel = np.flatnonzero(valid[i])
+        if not sel.size:
+            continue
+        straight = np.array(
+            [
+                _brute_min_distance(vo[i], r[i][sel], v[i][sel], f * turn[i])
+                for f in RESUME_FRACTIONS
+            ]
+        )  # (F, K') m
+        turned = np.array(
+            [
+                [
+                    _integrated_turning_min(vo[i], r[i, j], v[i, j] + vo[i], f * turn[i], w, 30.0)
+                    for j in sel
+                ]
+                for f in RESUME_FRACTIONS
+            ]
+        )  # (F, K', 2) m
+        ds = straight.min(axis=1)
+        capped, tcap = np.minimum(straight, R1), np.minimum(turned, R1)
+        rel = abs(capped[:-1] / capped[-1:] - 1)
+        trel = abs(tcap[:-1] / tcap[-1:] - 1)
+        if (
+            abs(ds / R0 - 1).min() < 1e-3
+            or (abs(straight / R1 - 1) < 1e-3).any()
+            or (abs(turned / R1 - 1) < 1e-6).any()
+            or ((rel > 0) & (rel < 1e-5)).any()
+            or ((trel > 0) & (trel < 1e-6)).any()
+        ):
+            continue  # a tie at a threshold: sampling cannot decide it
+        ok = (ds >= R0) & (capped >= capped[-1:]).all(axis=1)
+        ok &= (tcap >= tcap[-1:]).all(axis=(1, 2))
+        ok[-1] = True
+        assert got[i] == RESUME_FRACTIONS[np.argmax(ok)], i
+        checked += 1
+    assert checked > n // 2
+    assert (got <= plain).all() and (got < plain).any()  # stricter than no-worse, and it matters
+
+
+def test_resume_turn_knobs_defaults_and_validation():
+    r = load("ring").resolver
+    assert (r.resume_turn_s, r.resume_turn_clear) == (60.0, False)
+    sc = load("ring", ['resolver.resume_rule="no-worse-turns"', "resolver.resume_turn_s=20.0"])
+    assert (sc.resolver.resume_rule, sc.resolver.resume_turn_s) == ("no-worse-turns", 20.0)
+    with pytest.raises(UserError) as info:
+        load("ring", ["resolver.resume_turn_s=-1.0"])
+    msg = str(info.value)
+    assert "\n" not in msg and "resolver.resume_turn_s" in msg and "-1" in msg

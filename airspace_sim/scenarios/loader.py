@@ -192,7 +192,7 @@ NON_NEGATIVE_INT = _range(0, integer=True)
 PROBABILITY = _check("a probability in [0, 1]", lambda v: 0.0 <= v <= 1.0)
 NON_EMPTY = _check("a non-empty string", lambda v: bool(v.strip()))
 TURN_PREFERENCES = ("right", "nearest", "none")
-RESUME_RULES = ("hold", "partial", "no-worse", "diverging")
+RESUME_RULES = ("hold", "partial", "no-worse", "diverging", "no-worse-turns")
 
 #: Extra checks per ``"Class.field"`` beyond the annotated type: every value rule of the
 #: scenario lives here or in :func:`check_scenario` (cross-field), nowhere else.
@@ -221,6 +221,7 @@ RANGES: dict[str, Callable[[Any], str | None]] = {
     "ResolverSpec.resume_margin": _range(0, 100.0),
     "ResolverSpec.resume_decay_s": _range(0, MAX_TIME_S, lo_open=True, unit="s"),
     "ResolverSpec.resume_rule": _one_of(RESUME_RULES),
+    "ResolverSpec.resume_turn_s": _range(0, MAX_LOOKAHEAD_S, unit="s"),
     "ResolverSpec.probability_horizon_s": _range(0, MAX_LOOKAHEAD_S, lo_open=True, unit="s"),
     "ResolverSpec.probability_samples": _range(1, MAX_PROBABILITY_SAMPLES, integer=True),
     "ResolverSpec.side_memory_s": _range(0, MAX_TIME_S, unit="s"),

@@ -85,8 +85,15 @@ class ResolverSpec:
     #: radius, else the heading is held), "partial" (the largest of 1, 1/2, 1/4 of the turn
     #: that clears it), "no-worse" (the largest that clears r_safe·(1 + margin) and brings no
     #: intruder closer within that radius than holding would), "diverging" (the largest that
-    #: clears r_safe·(1 + margin) and keeps each intruder outside that radius or diverging)
+    #: clears r_safe·(1 + margin) and keeps each intruder outside that radius or diverging),
+    #: "no-worse-turns" ("no-worse", also against each intruder turning left or right)
     resume_rule: str = "hold"
+    #: "no-worse-turns": seconds an intruder is assumed to keep turning (left or right, at
+    #: the ownship's turn limit) before flying straight again
+    resume_turn_s: float = 60.0
+    #: "no-worse-turns": true lets a turn back bring an intruder's turned path closer as
+    #: long as it stays outside r_safe·(1 + margin) (false: outside the resume radius)
+    resume_turn_clear: bool = False
     #: "bands-probabilistic": seconds over which each intruder mode's prediction is judged
     #: (unset: the look-ahead), at this many evenly spaced times
     probability_horizon_s: float | None = None

@@ -15,7 +15,8 @@ reaches into it:
   the turn side is committed.
 
 Policy knobs live in ``scenario.resolver`` (``search_deg``, ``turn_preference``,
-``confirm_s``, ``resume_margin``, ``resume_decay_s``, ``resume_rule``, ``side_memory_s``,
+``confirm_s``, ``resume_margin``, ``resume_decay_s``, ``resume_rule``, ``resume_turn_s``,
+``resume_turn_clear``, ``side_memory_s``,
 ``probability_horizon_s``, ``probability_samples``); why they have the values they have is
 in ``docs/tuning.md``.
 """
@@ -31,6 +32,7 @@ from airspace_sim.avoidance import resume_heading_change
 from airspace_sim.avoidance.bands import CLEAR_TOLERANCE
 from airspace_sim.avoidance.cpa import cpa_min_ratio
 from airspace_sim.avoidance.resolvers import build_resolver
+from airspace_sim.avoidance.turn_paths import turned_path_min_ratio
 from airspace_sim.tracking.prediction import relative_positions
 from airspace_sim.world.control import Encounters, gather, screen
 
@@ -84,6 +86,8 @@ class AvoidancePolicy:
         self.resume_margin = float(spec.resume_margin)
         self.resume_decay_s = None if spec.resume_decay_s is None else float(spec.resume_decay_s)
         self.resume_rule = spec.resume_rule
+        self.resume_turn_s = float(spec.resume_turn_s)
+        self.resume_turn_clear = bool(spec.resume_turn_clear)
         self.confirm_steps = math.ceil(float(spec.confirm_s) / dt - 1e-9)
         self.preference = spec.turn_preference
         self.memory_steps = max(math.ceil(float(spec.side_memory_s) / dt - 1e-9), 1)
@@ -195,7 +199,13 @@ class AvoidancePolicy:
           it and brings none inside R1 closer than holding would, so an intruder already
           inside R1 and diverging no longer blocks the turn back for ever;
         - "diverging" is stricter: no conflict, and every intruder either outside R1 or
-          diverging after the turn (its closest point is now: ρ_k(ψ) = |r_k|/R1).
+          diverging after the turn (its closest point is now: ρ_k(ψ) = |r_k|/R1);
+        - "no-worse-turns" is "no-worse", and the same per-intruder test again for each
+          intruder turning left and right at the ownship's turn limit for
+          ``resume_turn_s`` (then straight), sampled every 2 s
+          (:func:`~airspace_sim.avoidance.turn_paths.turned_path_min_ratio`): a neighbour
+          that begins an avoidance turn now must not find the ownship closer than holding
+          would have left it (capped at R1, or at R0 with ``resume_turn_clear``).
         """
         vo = velocities[enc.owners]
         mx = max_heading_change[enc.owners]
@@ -206,7 +216,7 @@ class AvoidancePolicy:
         base = 1.0 + self.margin
         wide = base + extra
         radius = (self.r_safe * wide)[:, None]
-        if self.resume_rule in ("no-worse", "diverging"):
+        if self.resume_rule in ("no-worse", "diverging", "no-worse-turns"):
             # each (ownship, intruder) pair as its own row of the CPA kernel: (n, K, C)
             n, k = enc.valid.shape
             pair = cpa_min_ratio(
@@ -220,13 +230,31 @@ class AvoidancePolicy:
             ).reshape(n, k, -1)
             ratio = pair.min(axis=1, initial=np.inf)
             no_conflict = ratio * (wide / base)[:, None] >= 1.0 - CLEAR_TOLERANCE
-            if self.resume_rule == "no-worse":
+            if self.resume_rule in ("no-worse", "no-worse-turns"):
                 floor = np.minimum(pair[:, :, -1:], 1.0 - CLEAR_TOLERANCE)
             else:  # clear of R1, or closest now: the pair's current distance over R1
                 now = np.hypot(enc.rel_position[..., 0], enc.rel_position[..., 1])
                 now = now[:, :, None] / radius[:, :, None] * (1.0 - DIVERGING_TOLERANCE)
                 floor = np.minimum(now, 1.0 - CLEAR_TOLERANCE)
             ok = no_conflict & (pair >= floor).all(axis=1)
+            if self.resume_rule == "no-worse-turns":
+                # the same judgement against each intruder turning left or right at the
+                # ownship's own turn limit for resume_turn_s, sampled: (n, K, 3, C)
+                paths = turned_path_min_ratio(
+                    vo,
+                    enc.rel_position,
+                    enc.rel_velocity,
+                    enc.valid,
+                    psi,
+                    radius[:, 0],
+                    self.lookahead_s,
+                    mx / self.dt,
+                    self.resume_turn_s,
+                )
+                # capped at "hold"'s R1, or with resume_turn_clear at the clear radius R0
+                cap = (base / wide)[:, None, None, None] if self.resume_turn_clear else 1.0
+                worse = paths < np.minimum(paths[..., -1:], cap - CLEAR_TOLERANCE)
+                ok &= ~worse.any(axis=(1, 2))
         else:
             ratio = cpa_min_ratio(
                 vo, enc.rel_position, enc.rel_velocity, enc.valid, psi, radius, self.lookahead_s
