@@ -235,6 +235,13 @@ def make_tracker(kind: str, preset: Preset, sigma: float, params=None) -> parts.
     return registry.build("tracker", kind, preset, sigma, params=params)
 
 
+#: Largest tracker capacity whose views are gathered into kept buffers in one numba pass
+#: (:class:`_LiveTracks`): that saves a dozen numpy calls per step, which is what a small
+#: world's step costs (``docs/env-speed.md``); a large table's gathers cost the same either
+#: way, and its buffers would hold memory between steps.
+KEPT_VIEW_MAX_SLOTS = 4096
+
+
 class TrackView:
     """Read-only dense arrays over the live tracks of a :class:`TrackTable`, in slot order
     (``P`` live tracks): ``slots``, ``owner``, ``intruder``, ``misses``, ``age`` (steps
@@ -249,11 +256,12 @@ class TrackView:
     def __init__(self, table: TrackTable):
         t = table.tracker
         self._P = None
-        if type(t) in (ImmTracker, TruthTracker):  # float64 arrays of one capacity
-            self._live, fields = table._gather_live_view()
-        else:  # another tracker: numpy's gathers of whatever its arrays are
+        alive = t.alive
+        if type(t) in (ImmTracker, TruthTracker) and alive.size <= KEPT_VIEW_MAX_SLOTS:
+            self._live, fields = table._gather_live_view(alive)
+        else:  # a large table or another tracker: numpy's gathers of whatever its arrays are
             self._live = t
-            s = np.flatnonzero(t.alive)
+            s = np.flatnonzero(alive)
             # (np.take: a row gather several times faster than fancy indexing)
             arrays = (table._owner, table._intruder, table._misses, table._age, t.x, t.mu)
             fields = (_ro(s),) + tuple(_ro(np.take(a, s, axis=0)) for a in arrays)
@@ -440,11 +448,12 @@ class TrackTable:
             self._view = TrackView(self)
         return self._view
 
-    def _gather_live_view(self):
+    def _gather_live_view(self, alive):
         """``(buffers, fields)``: the view buffers (:class:`_LiveTracks`, (re)made for the
-        tracker's capacity and modes) and the live tracks gathered into them."""
+        tracker's capacity and modes) and the live tracks (``alive`` the tracker's)
+        gathered into them."""
         t = self.tracker
-        alive, x, mu = t.alive, t.x, t.mu
+        x, mu = t.x, t.mu
         cap, m = mu.shape
         live = self.__dict__.get("_live")
         if live is None or live.capacity != cap or live.n_modes != m:
