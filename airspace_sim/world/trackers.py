@@ -76,15 +76,20 @@ def _ro(a: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _measurements_by_slot(Z, slot_of_det, z):
+def _measurements_by_slot(Z, slot_of_det, z):  # pragma: no cover - compiled
     """Z (capacity, 2) ← NaN, then row ``slot_of_det[d]`` ← z[d] where that is ≥ 0 (one pass;
-    numpy's row scatter is several times slower)."""
+    numpy's row scatter is several times slower). Returns the number of detections without
+    a track (``slot_of_det`` < 0)."""
     Z[:] = np.nan
+    untracked = 0
     for d in range(slot_of_det.size):
         s = slot_of_det[d]
         if s >= 0:
             Z[s, 0] = z[d, 0]
             Z[s, 1] = z[d, 1]
+        else:
+            untracked += 1
+    return untracked
 
 
 @njit(cache=True)
@@ -488,12 +493,13 @@ class TrackTable:
         z = np.asarray(z, dtype=float).reshape(-1, 2)
         det_key = np.asarray(det_owner, np.int64) * self.n + np.asarray(det_intruder, np.int64)
         slot_of_det = self._index.get(det_key)  # −1: no track
+        untracked = slot_of_det.size
         # 1. step every live track (NaN row: no measurement)
         if len(self):
             cap = t.capacity
             if self._z.shape[0] != cap:
                 self._z = np.empty((cap, 2))
-            _measurements_by_slot(self._z, slot_of_det, z)
+            untracked = _measurements_by_slot(self._z, slot_of_det, z)
             truth = np.asarray(truth_states)[self._intruder] if t.uses_truth else None
             t.step(self._z, truth)
             # 2. age, misses (a gated measurement is a miss), drop
@@ -513,8 +519,8 @@ class TrackTable:
             if n_drop:
                 self._drop(self._drop_buf[:n_drop].copy())
         # 3. births
-        new = slot_of_det < 0
-        if new.any():
+        if untracked:
+            new = slot_of_det < 0
             self._births(time, det_key[new], z[new], truth_states)
 
     def _drop(self, slots: np.ndarray) -> None:
