@@ -207,3 +207,18 @@ def test_half_precision_actions_take_the_one_by_one_path_with_the_same_values():
     assert frac.tolist() == [-1.0, -0.0, 0.5, 1.0] and np.signbit(frac[1])
     wide = {a: v.astype(np.float32) for a, v in acts.items()}
     assert np.array_equal(_bits(env._decode(list(env.agents), wide)), _bits(frac))
+
+
+def test_relative_bearings_are_numpys_wrap_angle_bit_for_bit():
+    from airspace_sim.geometry import wrap_angle
+
+    rng = np.random.default_rng(30)
+    n = 500
+    bearing = rng.uniform(-np.pi, np.pi, n)
+    bearing[:4] = [0.0, -0.0, np.pi, -np.pi]
+    idx = rng.permutation(n)[:400]
+    heading = rng.uniform(-np.pi, np.pi, idx.size)
+    heading[:8] = [0.0, -0.0, np.pi, -np.pi, -np.pi, np.pi, 0.0, -0.0]
+    got = np.empty(idx.size)
+    sp.relative_bearings(bearing, idx, heading, got)
+    assert np.array_equal(_bits(got), _bits(wrap_angle(bearing[idx] - heading)))

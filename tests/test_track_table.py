@@ -298,14 +298,19 @@ def test_a_table_pickled_before_the_gating_rule_continues():
     assert len(t2) == 1 and t2.view().misses.tolist() == [0]
 
 
-def test_kept_view_buffers_hold_numpys_gathers_through_births_drops_and_pickling():
+@pytest.mark.parametrize("kept", [True, False])
+def test_kept_view_buffers_hold_numpys_gathers_through_births_drops_and_pickling(kept, monkeypatch):
     """The view's kept buffers (one numba gather per update) against numpy's gathers of the
     table, every step of a world whose tracks start, drop and grow the capacity; a pickled
-    table rebuilds them."""
+    table rebuilds them. ``kept`` False: a table above KEPT_VIEW_MAX_SLOTS (numpy's
+    gathers, no buffers)."""
     import pickle
 
     from airspace_sim.scenarios import load
-    from airspace_sim.world import World
+    from airspace_sim.world import World, trackers
+
+    if not kept:
+        monkeypatch.setattr(trackers, "KEPT_VIEW_MAX_SLOTS", 0)
 
     w = World(load("ring", ["traffic.count=8", "sensor.drop_after_misses=1"]), seed=2)
     caps, counts = set(), set()
@@ -325,3 +330,4 @@ def test_kept_view_buffers_hold_numpys_gathers_through_births_drops_and_pickling
             w = pickle.loads(pickle.dumps(w))
             assert w.tracks._view is None and "_live" not in w.tracks.__dict__
     assert len(counts) > 3 and len(caps) > 1
+    assert ("_live" in w.tracks.__dict__) == kept

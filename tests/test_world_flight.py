@@ -192,3 +192,18 @@ def test_agent_masks_match_the_numpy_masks():
     assert np.array_equal(flies, avoid & ~moved & ~want_agent)
     hr[17] = -np.inf
     assert flight.agent_masks(hr, controlled, avoid, moved, agent, flies)
+
+
+def test_a_subclass_desired_heading_is_still_flown():
+    """RouteAutopilot.turn_rate uses the fused commands only for the class's own desired
+    heading; a subclass that overrides it is steered toward its own."""
+
+    class North(RouteAutopilot):
+        def desired_heading(self, state):
+            return np.full(self.members.size, np.pi / 2)
+
+    fast, _, pos = _route(9, k=6)
+    ap = North.__new__(North)
+    ap.__dict__.update(fast.__dict__)
+    state = FlightState(pos, np.zeros(6), np.full(6, 200.0), np.full(6, 0.05), 1.0, 0)
+    assert np.array_equal(ap.turn_rate(state), np.full(6, 0.05))

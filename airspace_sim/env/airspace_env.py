@@ -45,7 +45,6 @@ from airspace_sim.env import checks
 from airspace_sim.env import rewards as rw
 from airspace_sim.env import spaces as sp
 from airspace_sim.errors import UserError
-from airspace_sim.geometry import wrap_angle
 from airspace_sim.world.autopilots import RouteAutopilot
 from airspace_sim.world.bodies import LOS
 from airspace_sim.world.snapshot import live_tracks
@@ -563,7 +562,8 @@ class AirspaceParallelEnv(ParallelEnv):
         pos, vel = w.positions[sel], w.velocities[sel]
         heading = w.headings[sel]
         _, _, cross, bearing, dist = self._route
-        rel_b = wrap_angle(bearing[sel] - heading)
+        rel_b = np.empty(idx.size)
+        sp.relative_bearings(bearing, idx, heading, rel_b)
         obs = np.empty((idx.size, lay.size))
         sp.encode_own_rows(
             idx,

@@ -69,6 +69,8 @@ import numpy as np
 from gymnasium import spaces
 from numba import njit
 
+from airspace_sim.world.flight import wrap
+
 V_REF = 300.0  #: m/s, speed normalisation
 #: discrete action index -> fraction of the turn-rate limit (CCW +): hard left .. hard right
 DISCRETE_LEVELS = (1.0, 0.5, 0.0, -0.5, -1.0)
@@ -243,6 +245,15 @@ def turn_rates_into(frac, idx, max_rate, rates):  # pragma: no cover - compiled
         rates[i] = frac[k] * max_rate[i]
 
 
+@njit(cache=True)
+def relative_bearings(bearing, idx, heading, out):  # pragma: no cover - compiled
+    """``out`` (A,) rad ← ``wrap_angle(bearing[idx] − heading)``: the bearing to the
+    waypoint relative to the heading of each ownship (``bearing`` (N,), ``heading`` (A,)),
+    with :func:`airspace_sim.world.flight.wrap` (numpy's ``wrap_angle`` bit for bit)."""
+    for k in range(idx.size):
+        out[k] = wrap(bearing[idx[k]] - heading[k])
+
+
 def _show(value) -> str:
     """A one-line, bounded rendering of a bad value for an error message."""
     text = repr(value).replace("\n", " ")
@@ -367,7 +378,8 @@ def _intruders_into(
     """:func:`encode_intruders_into`: zero the block, keep the tracks with finite
     ``x[:, :4]``, order them by (ownship, ``hypot`` range, track row) as
     :func:`encode_intruders_batch`'s ``lexsort`` does (a total order: the same rows),
-    then :func:`_encode_rows` into a (A, K, F) scratch copied into ``obs``."""
+    then the rows of :func:`_encode_rows` (the same expressions, the rotation computed
+    once per ownship) written into ``obs``."""
     A = obs.shape[0]
     F = (obs.shape[1] - col0) // K if K > 0 else 0
     for a in range(A):
@@ -400,14 +412,47 @@ def _intruders_into(
             k -= 1
         order[k] = t
         n += 1
-    rows = np.zeros((A, K, F))
-    _encode_rows(
-        order[:n], slot, dist, x, P, mu, own_pos, own_vel, heading, rng_, r_safe, look, rows
-    )
+    # per ownship: its body-frame rotation (the same math.cos / math.sin of the same
+    # heading as _encode_rows computes per row) and the next free row
+    cos_h, sin_h = np.empty(A), np.empty(A)
     for a in range(A):
-        for k in range(K):
-            for f in range(F):
-                obs[a, col0 + k * F + f] = rows[a, k, f]
+        cos_h[a], sin_h[a] = math.cos(heading[a]), math.sin(heading[a])
+    m = min(F - 11, mu.shape[1])
+    prev, rank = -1, 0
+    for q in range(n):
+        t = order[q]
+        a = slot[t]
+        if a != prev:
+            prev, rank = a, 0
+        if rank >= K:
+            continue
+        # _encode_rows' row, term by term
+        c, s = cos_h[a], sin_h[a]
+        dx, dy = x[t, 0] - own_pos[a, 0], x[t, 2] - own_pos[a, 1]
+        dvx, dvy = x[t, 1] - own_vel[a, 0], x[t, 3] - own_vel[a, 1]
+        px, py = c * dx + s * dy, -s * dx + c * dy
+        vx, vy = c * dvx + s * dvy, -s * dvx + c * dvy
+        pxx, pxy, pyy = P[t, 0, 0], P[t, 0, 2], P[t, 2, 2]
+        var_x = c * c * pxx + 2 * c * s * pxy + s * s * pyy
+        var_y = s * s * pxx - 2 * c * s * pxy + c * c * pyy
+        cov = -c * s * pxx + (c * c - s * s) * pxy + c * s * pyy
+        sx, sy = math.sqrt(max(var_x, 0.0)), math.sqrt(max(var_y, 0.0))
+        rho = cov / (sx * sy) if sx * sy > 0 else 0.0
+        vv = vx * vx + vy * vy
+        tcpa = -(px * vx + py * vy) / vv if vv > 1e-9 else 0.0
+        ahead = max(tcpa, 0.0)
+        b = col0 + rank * F
+        obs[a, b] = 1.0
+        obs[a, b + 1], obs[a, b + 2] = px / rng_, py / rng_
+        obs[a, b + 3], obs[a, b + 4] = vx / (2 * V_REF), vy / (2 * V_REF)
+        obs[a, b + 5] = dist[t] / rng_
+        obs[a, b + 6], obs[a, b + 7] = sx / r_safe, sy / r_safe
+        obs[a, b + 8] = rho
+        obs[a, b + 9] = tcpa / look
+        obs[a, b + 10] = math.hypot(px + vx * ahead, py + vy * ahead) / (2 * r_safe)
+        for k in range(m):
+            obs[a, b + 11 + k] = mu[t, k]
+        rank += 1
 
 
 @njit(cache=True, error_model="numpy")

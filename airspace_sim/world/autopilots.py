@@ -187,6 +187,9 @@ class RouteAutopilot(Autopilot):
         return out
 
     def turn_rate(self, state):
+        if type(self).desired_heading is not RouteAutopilot.desired_heading:
+            # a subclass's own desired heading, flown as before
+            return _toward(self.desired_heading(state), state, self.members)
         return self.commands(state)[0]
 
     def commands(self, state):

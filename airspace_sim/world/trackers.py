@@ -76,15 +76,20 @@ def _ro(a: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _measurements_by_slot(Z, slot_of_det, z):
+def _measurements_by_slot(Z, slot_of_det, z):  # pragma: no cover - compiled
     """Z (capacity, 2) ← NaN, then row ``slot_of_det[d]`` ← z[d] where that is ≥ 0 (one pass;
-    numpy's row scatter is several times slower)."""
+    numpy's row scatter is several times slower). Returns the number of detections without
+    a track (``slot_of_det`` < 0)."""
     Z[:] = np.nan
+    untracked = 0
     for d in range(slot_of_det.size):
         s = slot_of_det[d]
         if s >= 0:
             Z[s, 0] = z[d, 0]
             Z[s, 1] = z[d, 1]
+        else:
+            untracked += 1
+    return untracked
 
 
 @njit(cache=True)
@@ -235,6 +240,13 @@ def make_tracker(kind: str, preset: Preset, sigma: float, params=None) -> parts.
     return registry.build("tracker", kind, preset, sigma, params=params)
 
 
+#: Largest tracker capacity whose views are gathered into kept buffers in one numba pass
+#: (:class:`_LiveTracks`): that saves a dozen numpy calls per step, which is what a small
+#: world's step costs (``docs/env-speed.md``); a large table's gathers cost the same either
+#: way, and its buffers would hold memory between steps.
+KEPT_VIEW_MAX_SLOTS = 4096
+
+
 class TrackView:
     """Read-only dense arrays over the live tracks of a :class:`TrackTable`, in slot order
     (``P`` live tracks): ``slots``, ``owner``, ``intruder``, ``misses``, ``age`` (steps
@@ -249,11 +261,12 @@ class TrackView:
     def __init__(self, table: TrackTable):
         t = table.tracker
         self._P = None
-        if type(t) in (ImmTracker, TruthTracker):  # float64 arrays of one capacity
-            self._live, fields = table._gather_live_view()
-        else:  # another tracker: numpy's gathers of whatever its arrays are
+        alive = t.alive
+        if type(t) in (ImmTracker, TruthTracker) and alive.size <= KEPT_VIEW_MAX_SLOTS:
+            self._live, fields = table._gather_live_view(alive)
+        else:  # a large table or another tracker: numpy's gathers of whatever its arrays are
             self._live = t
-            s = np.flatnonzero(t.alive)
+            s = np.flatnonzero(alive)
             # (np.take: a row gather several times faster than fancy indexing)
             arrays = (table._owner, table._intruder, table._misses, table._age, t.x, t.mu)
             fields = (_ro(s),) + tuple(_ro(np.take(a, s, axis=0)) for a in arrays)
@@ -440,11 +453,12 @@ class TrackTable:
             self._view = TrackView(self)
         return self._view
 
-    def _gather_live_view(self):
+    def _gather_live_view(self, alive):
         """``(buffers, fields)``: the view buffers (:class:`_LiveTracks`, (re)made for the
-        tracker's capacity and modes) and the live tracks gathered into them."""
+        tracker's capacity and modes) and the live tracks (``alive`` the tracker's)
+        gathered into them."""
         t = self.tracker
-        alive, x, mu = t.alive, t.x, t.mu
+        x, mu = t.x, t.mu
         cap, m = mu.shape
         live = self.__dict__.get("_live")
         if live is None or live.capacity != cap or live.n_modes != m:
@@ -479,12 +493,13 @@ class TrackTable:
         z = np.asarray(z, dtype=float).reshape(-1, 2)
         det_key = np.asarray(det_owner, np.int64) * self.n + np.asarray(det_intruder, np.int64)
         slot_of_det = self._index.get(det_key)  # −1: no track
+        untracked = slot_of_det.size
         # 1. step every live track (NaN row: no measurement)
         if len(self):
             cap = t.capacity
             if self._z.shape[0] != cap:
                 self._z = np.empty((cap, 2))
-            _measurements_by_slot(self._z, slot_of_det, z)
+            untracked = _measurements_by_slot(self._z, slot_of_det, z)
             truth = np.asarray(truth_states)[self._intruder] if t.uses_truth else None
             t.step(self._z, truth)
             # 2. age, misses (a gated measurement is a miss), drop
@@ -504,8 +519,8 @@ class TrackTable:
             if n_drop:
                 self._drop(self._drop_buf[:n_drop].copy())
         # 3. births
-        new = slot_of_det < 0
-        if new.any():
+        if untracked:
+            new = slot_of_det < 0
             self._births(time, det_key[new], z[new], truth_states)
 
     def _drop(self, slots: np.ndarray) -> None:

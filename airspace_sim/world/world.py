@@ -260,9 +260,11 @@ class World:
                 raise UserError("heading_rate: contains an infinite value (use NaN for 'built-in')")
         else:
             agent[:] = False
-            np.logical_and(self.avoid, ~self.moved, out=avoid)
+            avoid = None
         if not self.controlled.any():
             avoid = None
+        elif avoid is None:
+            avoid = self.avoid & ~self.moved
         rate = self.policy.override(
             rate, desired, self.active, self.velocities, self.max_turn_rate * self.dt, avoid
         )
