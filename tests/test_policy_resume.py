@@ -162,9 +162,11 @@ def _integrated_turning_min(vo, r, vi, psi, w, turn_s, T=LOOKAHEAD_S, step=2.0, 
     return np.array(out)
 
 
-def test_no_worse_turns_by_brute_force():
+@pytest.mark.parametrize("clear", [False, True])
+def test_no_worse_turns_by_brute_force(clear):
     # "no-worse" on the straight prediction, and again against each intruder turning left
-    # and right at 3 deg/s for 30 s: no turned path comes closer (capped at R1) than holding.
+    # and right at 3 deg/s for 30 s: no turned path comes closer (capped at R1, or at R0
+    # with resume_turn_clear) than holding.
     rng = np.random.default_rng(21)
     n, k = 80, 2
     vo = rng.uniform(-250, 250, (n, 2))
@@ -175,6 +177,8 @@ def test_no_worse_turns_by_brute_force():
     pol = _policy("no-worse-turns", n)
     assert pol.resume_turn_s == 60.0  # the default
     pol.resume_turn_s = 30.0
+    pol.resume_turn_clear = clear
+    cap = R0 if clear else R1  # m, what a turned path may not be brought inside
     w = np.radians(3.0)
     enc = Encounters(np.arange(n), np.zeros((n, k), np.int64), r, v, valid)
     got = pol._resume_fraction(enc, vo, turn, np.full(n, w))
@@ -200,13 +204,13 @@ def test_no_worse_turns_by_brute_force():
             ]
         )  # (F, K', 2) m
         ds = straight.min(axis=1)
-        capped, tcap = np.minimum(straight, R1), np.minimum(turned, R1)
+        capped, tcap = np.minimum(straight, R1), np.minimum(turned, cap)
         rel = abs(capped[:-1] / capped[-1:] - 1)
         trel = abs(tcap[:-1] / tcap[-1:] - 1)
         if (
             abs(ds / R0 - 1).min() < 1e-3
             or (abs(straight / R1 - 1) < 1e-3).any()
-            or (abs(turned / R1 - 1) < 1e-6).any()
+            or (abs(turned / cap - 1) < 1e-6).any()
             or ((rel > 0) & (rel < 1e-5)).any()
             or ((trel > 0) & (trel < 1e-6)).any()
         ):

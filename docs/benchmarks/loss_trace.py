@@ -234,6 +234,8 @@ def main(argv=None):
         headings.append(w.headings.copy())
         for key in list(closest):
             a, b = key
+            if not (w.active[a] and w.active[b]):
+                continue  # an aircraft that left stays where it was
             closest[key] = min(closest[key], float(np.hypot(*(w.positions[a] - w.positions[b]))))
         began = w.airspace.began[LOS]
         for a, b in began.tolist():
