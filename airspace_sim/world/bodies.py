@@ -73,18 +73,20 @@ def _delete_sorted(keys: np.ndarray, gone: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _exact_pairs(keys, n, positions, d2):  # pragma: no cover - compiled
-    """The candidate ``keys`` (P,) sorted, ``i·n + j``, whose centres (``positions`` (N, 2) m)
-    are closer than each set's distance ``d2`` (3,) squared, m²: per set ``(keys, i, j)``
-    (sorted keys and their aircraft), in the order of ``d2``. ``dx² + dy² < d²`` as
-    chipmunk's circle test computes it."""
+def _exact_pairs(keys, ci, cj, positions, d2):  # pragma: no cover - compiled
+    """The candidate ``keys`` (P,) sorted, ``i·n + j``, of aircraft ``ci``, ``cj`` (P,),
+    whose centres (``positions`` (N, 2) m) are closer than each set's distance ``d2`` (3,)
+    squared, m²: per set ``(keys, i, j)`` (sorted keys and their aircraft), in the order
+    of ``d2``. ``dx² + dy² < d²`` as chipmunk's circle test computes it. (The aircraft
+    come in, not from ``keys // n``: an integer division per candidate and step was a
+    quarter of the pass.)"""
     out_k = np.empty((3, keys.size), dtype=np.int64)
     out_i = np.empty((3, keys.size), dtype=np.int64)
     out_j = np.empty((3, keys.size), dtype=np.int64)
     count = np.zeros(3, dtype=np.int64)
     for p in range(keys.size):
-        i = keys[p] // n
-        j = keys[p] - i * n
+        i = ci[p]
+        j = cj[p]
         dx = positions[j, 0] - positions[i, 0]
         dy = positions[j, 1] - positions[i, 1]
         dd = dx * dx + dy * dy
@@ -204,7 +206,7 @@ class Airspace:
         self._refresh_order()
         if self._order.size:
             space.step(1.0)  # every body has velocity 0 and keeps it
-        self._candidates = self._arbiter_keys()
+        self._set_candidates(self._arbiter_keys())
 
     def _refresh_order(self) -> None:
         """Aircraft index (B,) of each body in the space in pymunk's iteration order."""
@@ -244,14 +246,14 @@ class Airspace:
                 self.space, pymunk.batch.BodyFields.POSITION, self._buf_set
             )
             self.space.step(1.0)
-        self._candidates = self._arbiter_keys()
+        self._set_candidates(self._arbiter_keys())
         self._flown = 0.0
         self.refreshes += 1
 
     def _update_sets(self, reset_began: bool = True) -> None:
         """The three exact sets from the candidates at :attr:`positions`; :attr:`began`
         their new keys (added to it unless ``reset_began``)."""
-        sets = self._exact(self._candidates)
+        sets = self._exact(self._candidates, self._cand_ij)
         n = max(self.n, 1)
         began = {}
         self._ij = {}
@@ -263,11 +265,21 @@ class Airspace:
             self._ij[t] = (i, j)
         self.began = began
 
-    def _exact(self, candidates: np.ndarray) -> list:
+    def _set_candidates(self, keys: np.ndarray) -> None:
+        """:attr:`_candidates` ← ``keys`` (P,) sorted, and their aircraft ``_cand_ij``."""
+        n = max(self.n, 1)
+        i = keys // n
+        self._candidates, self._cand_ij = keys, (i, keys - i * n)
+
+    def _exact(self, candidates: np.ndarray, ij=None) -> list:
         """Per set (in :data:`SETS` order) ``(keys, i, j)`` of the ``candidates`` closer
-        than its distance at :attr:`positions`."""
+        than its distance at :attr:`positions`; ``ij`` their aircraft (default: from the
+        keys)."""
         d2 = np.array([self.distances[t] ** 2 for t in SETS])
-        return _exact_pairs(candidates, max(self.n, 1), self.positions, d2)
+        if ij is None:
+            n = max(self.n, 1)
+            ij = (candidates // n, candidates % n)
+        return _exact_pairs(candidates, ij[0], ij[1], self.positions, d2)
 
     # ----------------------------------------------------------------- public
     def set_velocities(self, velocities: np.ndarray) -> None:
@@ -296,9 +308,9 @@ class Airspace:
             self.space.remove(self.bodies[i], self.shapes[i])
         self.in_space[idx] = False
         self._refresh_order()
-        n = max(self.n, 1)
-        k = self._candidates
-        self._candidates = k[self.in_space[k // n] & self.in_space[k % n]]
+        i, j = self._cand_ij
+        keep = self.in_space[i] & self.in_space[j]
+        self._candidates, self._cand_ij = self._candidates[keep], (i[keep], j[keep])
         self._update_sets(reset_began=False)
 
     def add(self, indices, positions) -> None:
