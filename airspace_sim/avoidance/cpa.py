@@ -47,7 +47,11 @@ def cpa_min_ratio(own_velocity, rel_position, rel_velocity, valid, candidates, r
     r = np.ascontiguousarray(rel_position, dtype=float)
     v = np.ascontiguousarray(rel_velocity, dtype=float)
     psi = np.ascontiguousarray(candidates, dtype=float)
-    radius = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, dtype=float), valid.shape))
+    # writable as well as contiguous: numba types a read-only array apart, and a second
+    # specialisation would be compiled (or loaded) the first time a caller passes one
+    radius = np.require(
+        np.broadcast_to(np.asarray(radius, dtype=float), valid.shape), requirements=("C", "W")
+    )
     return _cpa_kernel(vo, r, v, valid, psi, radius, float(lookahead_s))
 
 
