@@ -198,10 +198,21 @@ def random_sector(scenario: Scenario, rng: np.random.Generator) -> list[Aircraft
         vel[k] = a.speed * math.cos(h), a.speed * math.sin(h)
     m = n_hand
     speeds = _speeds(scenario, rng)
+    # Only aircraft within r_safe of a candidate can reject it, and within the reach
+    # r_safe + (fastest relative speed)·T can fail its spawn-clear test (the distance at
+    # time t is at least |Δp| - |Δv|·t), so each test looks only at the 3 x 3 grid cells
+    # around the candidate: the same decisions as against every placed aircraft.
+    v_max = max([abs(a.speed) for a in hand] + [float(np.abs(speeds).max())])
+    near = _Grid(r_safe)
+    clear = _Grid(r_safe + 2 * v_max * clear_s) if clear_s > 0 else None
+    for k in range(m):
+        near.add(k, placed[k])
+        if clear is not None:
+            clear.add(k, placed[k])
     out = []
     for i, aid in enumerate(_ids("ac", t.count)):
         for _attempt in range(MAX_TRIES):
-            p = _place(rng, placed[:m], side, r_safe)
+            p = _place(rng, placed, near, side, r_safe)
             if p is None:
                 raise UserError(
                     f"{scenario.source}: traffic.count: cannot place {t.count} aircraft more "
@@ -214,7 +225,10 @@ def random_sector(scenario: Scenario, rng: np.random.Generator) -> list[Aircraft
                     break
             heading = math.atan2(dest[1] - p[1], dest[0] - p[0])
             v = speeds[i] * np.array([math.cos(heading), math.sin(heading)])
-            if clear_s <= 0 or _min_distance(placed[:m] - p, vel[:m] - v, clear_s) > r_safe:
+            if clear is None:
+                break
+            idx = clear.around(p)
+            if _min_distance(placed[idx] - p, vel[idx] - v, clear_s) > r_safe:
                 break
         else:
             raise UserError(
@@ -224,9 +238,42 @@ def random_sector(scenario: Scenario, rng: np.random.Generator) -> list[Aircraft
                 f"got {clear_s:g}"
             )
         placed[m], vel[m] = p, v
+        near.add(m, p)
+        if clear is not None:
+            clear.add(m, p)
         m += 1
         out.append(_spec(scenario, aid, p, heading, speeds[i], [tuple(dest)]))
     return out
+
+
+class _Grid:
+    """Indices of points bucketed in square cells (a dict of the occupied cells), so that
+    every point within ``reach`` metres of a query point is in its 3 x 3 cells.
+
+    The cell side is ``1.01·reach + 1`` m rather than ``reach``: a pair whose computed
+    distance rounds to within ``reach`` (coordinates up to the loader's 1e8 m carry ~1e-8 m
+    of rounding) is then never two cells apart, whatever the rounding of ``x / cell``.
+    Hand-placed aircraft outside the sector just land in their own cells.
+    """
+
+    def __init__(self, reach: float):
+        self.cell = 1.01 * reach + 1.0
+        self.cells: dict[tuple[int, int], list[int]] = {}
+
+    def _key(self, p) -> tuple[int, int]:
+        return math.floor(p[0] / self.cell), math.floor(p[1] / self.cell)
+
+    def add(self, k: int, p) -> None:
+        self.cells.setdefault(self._key(p), []).append(k)
+
+    def around(self, p) -> np.ndarray:
+        """Indices (int array, any order) of the points in the 3 x 3 cells around ``p``."""
+        ix, iy = self._key(p)
+        out: list[int] = []
+        for jx in (ix - 1, ix, ix + 1):
+            for jy in (iy - 1, iy, iy + 1):
+                out += self.cells.get((jx, jy), ())
+        return np.array(out, dtype=np.intp)
 
 
 def _min_distance(rel_pos: np.ndarray, rel_vel: np.ndarray, horizon_s: float) -> float:
@@ -242,17 +289,21 @@ def _min_distance(rel_pos: np.ndarray, rel_vel: np.ndarray, horizon_s: float) ->
     return float(np.hypot(*(rel_pos + t[:, None] * rel_vel).T).min())
 
 
-def _place(rng, placed: np.ndarray, side: float, r_safe: float, batch: int = 64):
-    """Rejection sampling, vectorised: the first of i.i.d. uniform candidates (drawn
-    ``batch`` at a time) farther than r_safe from every placed point; None after MAX_TRIES."""
+def _place(rng, placed: np.ndarray, near: _Grid, side: float, r_safe: float, batch: int = 64):
+    """Rejection sampling: the first of i.i.d. uniform candidates (drawn ``batch`` at a
+    time) farther than r_safe from every placed point; None after MAX_TRIES.
+
+    ``near`` holds the indices into ``placed`` of the points placed so far; a candidate is
+    tested only against those in its grid cells (the others are farther than r_safe), with
+    the same squared distance per pair as a test against all of them.
+    """
+    r2 = r_safe**2
     for _ in range(0, MAX_TRIES, batch):
         cand = rng.uniform(-side / 2, side / 2, size=(batch, 2))
-        if placed.shape[0] == 0:
-            return cand[0]
-        d2 = ((cand[:, None, :] - placed[None, :, :]) ** 2).sum(axis=-1).min(axis=1)
-        ok = np.flatnonzero(d2 > r_safe**2)
-        if ok.size:
-            return cand[ok[0]]
+        for c in cand:
+            idx = near.around(c)
+            if idx.size == 0 or ((c - placed[idx]) ** 2).sum(axis=-1).min() > r2:
+                return c
     return None
 
 
