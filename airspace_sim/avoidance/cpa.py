@@ -96,10 +96,10 @@ def cpa_min_ratio_numpy(
 
 
 @njit(inline="always", error_model="numpy")
-def _pair_ratio2(vo, r, v, radius, n, k, rvx, rvy, lookahead_s):  # pragma: no cover
-    """(CPA distance over [0, T] / radius)² of ownship ``n`` (velocity turned to
-    ``(rvx, rvy)``) and intruder ``k``: the one formula every kernel here uses, so that
-    they all give the same bits as :func:`cpa_min_ratio_numpy`."""
+def _pair_d2(vo, r, v, n, k, rvx, rvy, lookahead_s):  # pragma: no cover - compiled
+    """(CPA distance over [0, T])², m², of ownship ``n`` (velocity turned to ``(rvx, rvy)``
+    m/s) and intruder ``k``: the one formula every kernel here uses, so that they all
+    give the same bits as :func:`cpa_min_ratio_numpy`."""
     rx, ry = r[n, k, 0], r[n, k, 1]
     vx = (v[n, k, 0] + vo[n, 0]) - rvx
     vy = (v[n, k, 1] + vo[n, 1]) - rvy
@@ -108,7 +108,14 @@ def _pair_ratio2(vo, r, v, radius, n, k, rvx, rvy, lookahead_s):  # pragma: no c
     t = -dot / max(v2, 1e-300)
     t = min(max(t, 0.0), lookahead_s)
     d2 = (t * v2 + 2.0 * dot) * t + (rx * rx + ry * ry)
-    return max(d2, 0.0) * (1.0 / (radius[n, k] * radius[n, k]))
+    return max(d2, 0.0)
+
+
+@njit(inline="always", error_model="numpy")
+def _pair_ratio2(vo, r, v, radius, n, k, rvx, rvy, lookahead_s):  # pragma: no cover
+    """(CPA distance over [0, T] / radius)² of ownship ``n`` and intruder ``k``
+    (:func:`_pair_d2` over ``radius[n, k]²``)."""
+    return _pair_d2(vo, r, v, n, k, rvx, rvy, lookahead_s) * (1.0 / (radius[n, k] * radius[n, k]))
 
 
 @njit(cache=True, error_model="numpy")
@@ -190,15 +197,7 @@ def _row_inverse_r2(radius, valid, n, inv_r2):  # pragma: no cover - compiled
 @njit(inline="always", error_model="numpy")
 def _pair_q2(vo, r, v, inv_r2, n, k, rvx, rvy, lookahead_s):  # pragma: no cover - compiled
     """:func:`_pair_ratio2` with the pair's ``1 / radius²`` from :func:`_row_inverse_r2`."""
-    rx, ry = r[n, k, 0], r[n, k, 1]
-    vx = (v[n, k, 0] + vo[n, 0]) - rvx
-    vy = (v[n, k, 1] + vo[n, 1]) - rvy
-    dot = vx * rx + vy * ry
-    v2 = vx * vx + vy * vy
-    t = -dot / max(v2, 1e-300)
-    t = min(max(t, 0.0), lookahead_s)
-    d2 = (t * v2 + 2.0 * dot) * t + (rx * rx + ry * ry)
-    return max(d2, 0.0) * inv_r2[k]
+    return _pair_d2(vo, r, v, n, k, rvx, rvy, lookahead_s) * inv_r2[k]
 
 
 @njit(cache=True, error_model="numpy")
@@ -513,6 +512,23 @@ def _sort_row(
     return n_scan
 
 
+@njit(cache=True)
+def _sort_scratch(n_cand):  # pragma: no cover - compiled
+    """The scratch arrays of :func:`_sort_row` for rows of ``n_cand`` candidates:
+    ``usable`` (C,); the entries to sort: value (C,) rad, key (C,), ``ψ > 0`` (C,), index
+    (C,); their permutation (C,); the four tail lists (4, C) and their lengths (4,)."""
+    return (
+        np.empty(n_cand, np.bool_),
+        np.empty(n_cand),
+        np.empty(n_cand),
+        np.empty(n_cand, np.bool_),
+        np.empty(n_cand, np.int64),
+        np.empty(n_cand, np.int64),
+        np.empty((4, n_cand)),
+        np.zeros(4, np.int64),
+    )
+
+
 @njit(cache=True, error_model="numpy")
 def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - compiled
     """Rows of ``[grid (G,), −mx[n], mx[n], extra[n] (E,)]`` (NaN outside ``±mx[n]``), sorted.
@@ -532,16 +548,7 @@ def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - comp
     out = np.empty((n_own, n_cand))
     origin = np.empty((n_own, n_cand), dtype=np.int64)
     all_v, all_m, all_l, all_i = _grid_order(grid, left_penalty)
-    usable = np.empty(n_cand, np.bool_)
-    xv, xm, xl, xi = (
-        np.empty(n_cand),
-        np.empty(n_cand),
-        np.empty(n_cand, np.bool_),
-        np.empty(n_cand, np.int64),
-    )
-    perm = np.empty(n_cand, np.int64)
-    tail = np.empty((4, n_cand))
-    nt = np.zeros(4, np.int64)
+    usable, xv, xm, xl, xi, perm, tail, nt = _sort_scratch(n_cand)
     fv, fm, fl, fi = all_v.copy(), all_m.copy(), all_l.copy(), all_i.copy()
     nf, last = -1, np.nan
     for n in range(n_own):
@@ -612,16 +619,7 @@ def band_rows(
     cos_grid, sin_grid = _grid_trig(grid)
     clear2 = _sqrt_threshold(threshold)
     origin = np.empty(n_cand, np.int64)
-    usable = np.empty(n_cand, np.bool_)
-    xv, xm, xl, xi = (
-        np.empty(n_cand),
-        np.empty(n_cand),
-        np.empty(n_cand, np.bool_),
-        np.empty(n_cand, np.int64),
-    )
-    perm = np.empty(n_cand, np.int64)
-    tail = np.empty((4, n_cand))
-    nt = np.zeros(4, np.int64)
+    usable, xv, xm, xl, xi, perm, tail, nt = _sort_scratch(n_cand)
     blockers = np.empty(2, dtype=np.int64)
     inv_r2 = np.empty(n_int)
     cs, sn = np.cos(0.0), np.sin(0.0)
