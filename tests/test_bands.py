@@ -327,6 +327,24 @@ def test_kernel_equals_numpy_reference():
     assert np.isnan(a[0, 3]) and np.isfinite(a[1:]).all()
 
 
+def test_pair_ratios_are_each_intruder_alone():
+    from airspace_sim.avoidance.cpa import cpa_min_ratio_numpy, cpa_pair_ratios
+
+    rng = np.random.default_rng(12)
+    vo, r, v, valid = random_scene(rng, 7, 4)
+    cand = rng.uniform(-1.0, 1.0, (7, 6))
+    radius = rng.uniform(2000.0, 4000.0, (7, 1))  # per ownship, as the resume rules pass it
+    got = cpa_pair_ratios(vo, r, v, valid, cand, radius, 100.0)
+    assert got.shape == (7, 4, 6)
+    for k in range(4):  # the numpy reference with every other intruder masked out
+        alone = valid & (np.arange(4) == k)
+        want = cpa_min_ratio_numpy(vo, r, v, alone, cand, radius, 100.0)
+        assert np.array_equal(got[:, k], want)
+    assert np.all(got[~valid] == np.inf) and (~valid).any() and valid.any()
+    none = cpa_pair_ratios(vo, r[:, :0], v[:, :0], valid[:, :0], cand, 1.0, 100.0)
+    assert none.shape == (7, 0, 6)
+
+
 def test_left_penalty_biases_toward_right_turns():
     # intruder slightly right of dead ahead: the nearest clear heading is a left turn
     vo = np.array([[0.0, 250.0]])

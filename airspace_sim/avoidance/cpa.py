@@ -51,6 +51,26 @@ def cpa_min_ratio(own_velocity, rel_position, rel_velocity, valid, candidates, r
     return _cpa_kernel(vo, r, v, valid, psi, radius, float(lookahead_s))
 
 
+def cpa_pair_ratios(
+    own_velocity, rel_position, rel_velocity, valid, candidates, radius, lookahead_s
+):
+    """:func:`cpa_min_ratio` of each (ownship, intruder) pair on its own, ``(N, K, C)``:
+    the ratio to intruder ``k`` alone (``inf`` for an invalid slot), each pair a row of
+    the kernel. Arguments as there; ``radius`` a float or an array that broadcasts to
+    ``(N, K)``, m."""
+    valid = np.asarray(valid, dtype=bool)
+    n, k = valid.shape
+    return cpa_min_ratio(
+        np.repeat(own_velocity, k, axis=0),
+        np.reshape(rel_position, (n * k, 1, 2)),
+        np.reshape(rel_velocity, (n * k, 1, 2)),
+        valid.reshape(n * k, 1),
+        np.repeat(candidates, k, axis=0),
+        np.broadcast_to(np.asarray(radius, dtype=float), (n, k)).reshape(n * k, 1),
+        lookahead_s,
+    ).reshape(n, k, np.shape(candidates)[-1])
+
+
 def cpa_min_ratio_numpy(
     own_velocity, rel_position, rel_velocity, valid, candidates, radius, lookahead_s
 ):
