@@ -381,7 +381,7 @@ def _flown_min_ratio(vo, r, v, valid, psi, radius, T, w, steps=24001):
 
 
 def test_turning_cpa_instantaneous_rate_is_plain_cpa():
-    from airspace_sim.avoidance.cpa import cpa_min_ratio_turning
+    from airspace_sim.avoidance.cpa_turning import cpa_min_ratio_turning
 
     rng = np.random.default_rng(3)
     vo, r, v, valid = random_scene(rng, 20, 6)
@@ -393,7 +393,7 @@ def test_turning_cpa_instantaneous_rate_is_plain_cpa():
 
 
 def test_turning_cpa_matches_dense_flown_trajectory():
-    from airspace_sim.avoidance.cpa import cpa_min_ratio_turning
+    from airspace_sim.avoidance.cpa_turning import cpa_min_ratio_turning
 
     rng = np.random.default_rng(4)
     w = np.radians(3.0)
@@ -417,7 +417,7 @@ def test_band_search_with_turn_rate_sees_the_turn_path():
     v = -vo[:, None, :]  # stationary intruder
     valid = np.ones((1, 1), bool)
     psi = np.array([[-np.pi / 2]])
-    from airspace_sim.avoidance.cpa import cpa_min_ratio_turning
+    from airspace_sim.avoidance.cpa_turning import cpa_min_ratio_turning
 
     inst = cpa_min_ratio(vo, r, v, valid, psi, R, 120.0)[0, 0]
     flown = cpa_min_ratio_turning(vo, r, v, valid, psi, R, 120.0, np.radians(3.0))[0, 0]

@@ -33,8 +33,8 @@ from airspace_sim.avoidance.cpa import (
     _preferred_kernel,
     band_rows,
     cpa_min_ratio,
-    cpa_min_ratio_turning,
 )
+from airspace_sim.avoidance.cpa_turning import cpa_min_ratio_turning
 from airspace_sim.avoidance.heading import (
     boundary_heading_changes,
     boundary_roots_in_window,
