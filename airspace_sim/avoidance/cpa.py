@@ -255,8 +255,8 @@ def _first_clear_row(
     not C·K. The last intruder that blocked a candidate on the same side (ψ ≤ 0 or ψ > 0,
     ``blockers`` (2,) scratch) is tried first: neighbouring candidates on a side are
     usually blocked by the same one, and the preference order alternates between the
-    sides (one blocker for both sides took 2.3 times the pair evaluations on the
-    1000-aircraft benchmark traffic). An intruder already closer than the threshold
+    sides (one blocker for both sides costs far more pair evaluations; figures in
+    ``docs/performance.md``, "Band search"). An intruder already closer than the threshold
     blocks every heading (for ``t > 0`` the computed ``t·|v|² + 2 r·v`` rounds negative,
     so the computed CPA distance never exceeds the current one, in floating point too):
     such a row has no clear candidate and is not scanned.
