@@ -562,13 +562,12 @@ def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - comp
     after an insertion sort by the whole key (a few dozen per row; of an index
     permutation, one move per shift) — which are merged (:func:`_sort_row`). The ``inf``
     and then NaN ``mag`` entries follow in the listing order, which is where the lexsort
-    puts them (every NaN here is the same ``np.nan``). Returns the sorted rows (n_own, C)
-    and the grid index of each entry (−1: not from the grid).
+    puts them (every NaN here is the same ``np.nan``). Returns the sorted rows (n_own, C).
     """
     n_own, n_extra = extra.shape
     n_cand = grid.size + 2 + n_extra
     out = np.empty((n_own, n_cand))
-    origin = np.empty((n_own, n_cand), dtype=np.int64)
+    origin = np.empty(n_cand, np.int64)  # scratch: _sort_row's grid indices, unused here
     all_v, all_m, all_l, all_i = _grid_order(grid, left_penalty)
     usable, xv, xm, xl, xi, perm, tail, nt = _sort_scratch(n_cand)
     fv, fm, fl, fi = all_v.copy(), all_m.copy(), all_l.copy(), all_i.copy()
@@ -589,7 +588,7 @@ def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - comp
             nf,
             grid.size,
             out[n],
-            origin[n],
+            origin,
             usable,
             xv,
             xm,
@@ -599,7 +598,7 @@ def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - comp
             tail,
             nt,
         )
-    return out, origin
+    return out
 
 
 @njit(cache=True, error_model="numpy")
