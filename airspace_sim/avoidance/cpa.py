@@ -623,8 +623,9 @@ def band_rows(
     (:func:`_first_clear_row`, clear: ratio ≥ ``threshold``) and, on the sides ``wanted``
     (N, 2) that have none, the best blocked one (:func:`_best_blocked_row`). ``vo`` (N, 2)
     m/s, ``r``, ``v`` (N, K, 2) m and m/s, ``valid`` (N, K), ``lookahead_s`` s, ``mx``
-    (N,) rad, ``grid`` (G,) rad increasing; other arguments as there (``radius`` (N, K); ``extra`` (N, E) the boundary roots, of which
-    row ``n`` uses the first ``n_extra[n]``, the others NaN).
+    (N,) rad, ``grid`` (G,) rad increasing; other arguments as there (``radius`` (N, K)
+    m; ``extra`` (N, E) rad the boundary roots, of which row ``n`` uses the first
+    ``n_extra[n]``, the others NaN).
 
     Returns ``(candidates (N, C), first_clear (N, 3), best_blocked (N, 2), ratio0 (N,))``,
     the arrays of those functions, without the (N, C) origin and usable arrays between

@@ -27,7 +27,8 @@ def cpa_min_ratio_turning(
     turn_rate,
     segment=TURN_SEGMENT,
 ):
-    """:func:`~airspace_sim.avoidance.cpa.cpa_min_ratio` with the ownship turning at ``turn_rate`` until ``ψ`` is reached.
+    """:func:`~airspace_sim.avoidance.cpa.cpa_min_ratio` with the ownship turning at
+    ``turn_rate`` until ``ψ`` is reached.
 
     The ownship flies an arc of radius ``|v_o|/ω`` from its current heading to ``heading + ψ``
     (taking ``|ψ|/ω`` seconds), then straight; the intruder flies straight. The arc is
