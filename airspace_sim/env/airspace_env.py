@@ -47,6 +47,7 @@ from airspace_sim.env import spaces as sp
 from airspace_sim.errors import UserError
 from airspace_sim.world.autopilots import RouteAutopilot
 from airspace_sim.world.bodies import LOS
+from airspace_sim.world.flight import relative_bearings
 from airspace_sim.world.snapshot import live_tracks
 
 RENDER_FPS = 10
@@ -556,7 +557,7 @@ class AirspaceParallelEnv(ParallelEnv):
         heading = w.headings[sel]
         _, _, cross, bearing, dist = self._route
         rel_b = np.empty(idx.size)
-        sp.relative_bearings(bearing, idx, heading, rel_b)
+        relative_bearings(bearing, idx, heading, rel_b)
         obs = np.empty((idx.size, lay.size))
         sp.encode_own_rows(
             idx,

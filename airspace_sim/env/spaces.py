@@ -69,8 +69,6 @@ import numpy as np
 from gymnasium import spaces
 from numba import njit
 
-from airspace_sim.world.flight import wrap
-
 V_REF = 300.0  #: m/s, speed normalisation
 #: discrete action index -> fraction of the turn-rate limit (CCW +): hard left .. hard right
 DISCRETE_LEVELS = (1.0, 0.5, 0.0, -0.5, -1.0)
@@ -243,15 +241,6 @@ def turn_rates_into(frac, idx, max_rate, rates):  # pragma: no cover - compiled
     for k in range(idx.size):
         i = idx[k]
         rates[i] = frac[k] * max_rate[i]
-
-
-@njit(cache=True)
-def relative_bearings(bearing, idx, heading, out):  # pragma: no cover - compiled
-    """``out`` (A,) rad ← ``wrap_angle(bearing[idx] − heading)``: the bearing to the
-    waypoint relative to the heading of each ownship (``bearing`` (N,), ``heading`` (A,)),
-    with :func:`airspace_sim.world.flight.wrap` (numpy's ``wrap_angle`` bit for bit)."""
-    for k in range(idx.size):
-        out[k] = wrap(bearing[idx[k]] - heading[k])
 
 
 def _show(value) -> str:
