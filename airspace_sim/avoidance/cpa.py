@@ -62,13 +62,17 @@ def cpa_pair_ratios(
     ``(N, K)``, m."""
     valid = np.asarray(valid, dtype=bool)
     n, k = valid.shape
+    # a writable array, as np.repeat gives: a read-only one (a broadcast view when k = 1)
+    # is another numba type, a second specialisation of the kernel to compile or load
+    rad = np.empty((n * k, 1))
+    rad[:, 0] = np.broadcast_to(np.asarray(radius, dtype=float), (n, k)).reshape(-1)
     return cpa_min_ratio(
         np.repeat(own_velocity, k, axis=0),
         np.reshape(rel_position, (n * k, 1, 2)),
         np.reshape(rel_velocity, (n * k, 1, 2)),
         valid.reshape(n * k, 1),
         np.repeat(candidates, k, axis=0),
-        np.broadcast_to(np.asarray(radius, dtype=float), (n, k)).reshape(n * k, 1),
+        rad,
         lookahead_s,
     ).reshape(n, k, np.shape(candidates)[-1])
 
