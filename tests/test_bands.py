@@ -327,6 +327,24 @@ def test_kernel_equals_numpy_reference():
     assert np.isnan(a[0, 3]) and np.isfinite(a[1:]).all()
 
 
+def test_pair_ratios_are_each_intruder_alone():
+    from airspace_sim.avoidance.cpa import cpa_min_ratio_numpy, cpa_pair_ratios
+
+    rng = np.random.default_rng(12)
+    vo, r, v, valid = random_scene(rng, 7, 4)
+    cand = rng.uniform(-1.0, 1.0, (7, 6))
+    radius = rng.uniform(2000.0, 4000.0, (7, 1))  # per ownship, as the resume rules pass it
+    got = cpa_pair_ratios(vo, r, v, valid, cand, radius, 100.0)
+    assert got.shape == (7, 4, 6)
+    for k in range(4):  # the numpy reference with every other intruder masked out
+        alone = valid & (np.arange(4) == k)
+        want = cpa_min_ratio_numpy(vo, r, v, alone, cand, radius, 100.0)
+        assert np.array_equal(got[:, k], want)
+    assert np.all(got[~valid] == np.inf) and (~valid).any() and valid.any()
+    none = cpa_pair_ratios(vo, r[:, :0], v[:, :0], valid[:, :0], cand, 1.0, 100.0)
+    assert none.shape == (7, 0, 6)
+
+
 def test_left_penalty_biases_toward_right_turns():
     # intruder slightly right of dead ahead: the nearest clear heading is a left turn
     vo = np.array([[0.0, 250.0]])
@@ -363,7 +381,7 @@ def _flown_min_ratio(vo, r, v, valid, psi, radius, T, w, steps=24001):
 
 
 def test_turning_cpa_instantaneous_rate_is_plain_cpa():
-    from airspace_sim.avoidance.cpa import cpa_min_ratio_turning
+    from airspace_sim.avoidance.cpa_turning import cpa_min_ratio_turning
 
     rng = np.random.default_rng(3)
     vo, r, v, valid = random_scene(rng, 20, 6)
@@ -375,7 +393,7 @@ def test_turning_cpa_instantaneous_rate_is_plain_cpa():
 
 
 def test_turning_cpa_matches_dense_flown_trajectory():
-    from airspace_sim.avoidance.cpa import cpa_min_ratio_turning
+    from airspace_sim.avoidance.cpa_turning import cpa_min_ratio_turning
 
     rng = np.random.default_rng(4)
     w = np.radians(3.0)
@@ -399,7 +417,7 @@ def test_band_search_with_turn_rate_sees_the_turn_path():
     v = -vo[:, None, :]  # stationary intruder
     valid = np.ones((1, 1), bool)
     psi = np.array([[-np.pi / 2]])
-    from airspace_sim.avoidance.cpa import cpa_min_ratio_turning
+    from airspace_sim.avoidance.cpa_turning import cpa_min_ratio_turning
 
     inst = cpa_min_ratio(vo, r, v, valid, psi, R, 120.0)[0, 0]
     flown = cpa_min_ratio_turning(vo, r, v, valid, psi, R, 120.0, np.radians(3.0))[0, 0]

@@ -211,6 +211,7 @@ def test_half_precision_actions_take_the_one_by_one_path_with_the_same_values():
 
 def test_relative_bearings_are_numpys_wrap_angle_bit_for_bit():
     from airspace_sim.geometry import wrap_angle
+    from airspace_sim.world.flight import relative_bearings
 
     rng = np.random.default_rng(30)
     n = 500
@@ -220,5 +221,5 @@ def test_relative_bearings_are_numpys_wrap_angle_bit_for_bit():
     heading = rng.uniform(-np.pi, np.pi, idx.size)
     heading[:8] = [0.0, -0.0, np.pi, -np.pi, -np.pi, np.pi, 0.0, -0.0]
     got = np.empty(idx.size)
-    sp.relative_bearings(bearing, idx, heading, got)
+    relative_bearings(bearing, idx, heading, got)
     assert np.array_equal(_bits(got), _bits(wrap_angle(bearing[idx] - heading)))

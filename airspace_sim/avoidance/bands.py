@@ -33,8 +33,8 @@ from airspace_sim.avoidance.cpa import (
     _preferred_kernel,
     band_rows,
     cpa_min_ratio,
-    cpa_min_ratio_turning,
 )
+from airspace_sim.avoidance.cpa_turning import cpa_min_ratio_turning
 from airspace_sim.avoidance.heading import (
     boundary_heading_changes,
     boundary_roots_in_window,
@@ -160,24 +160,14 @@ def preferred_candidates(max_heading_change, resolution, extra, left_penalty=0.0
     ``max_heading_change`` (N,) rad, ``resolution`` rad, ``extra`` None or (N, E) rad. One
     numba pass per row (:func:`_preferred_kernel`): the same array.
     """
-    return preferred_candidates_on_grid(max_heading_change, resolution, extra, left_penalty)[0]
-
-
-def preferred_candidates_on_grid(max_heading_change, resolution, extra, left_penalty=0.0):
-    """:func:`preferred_candidates` and where each came from: ``(candidates (N, C) rad,
-    grid (G,) rad, origin (N, C) int)``, ``origin[n, c] = g`` when the candidate is
-    ``grid[g]``, −1 when it is a limit or an extra (the search kernels look the grid's
-    cos and sin up instead of computing them per row)."""
     mx = np.ascontiguousarray(max_heading_change, dtype=float)
     grid = _grid(mx, resolution)
     if extra is None:
         extra = np.empty((mx.shape[0], 0))
     extra = np.ascontiguousarray(np.asarray(extra, dtype=float).reshape(mx.shape[0], -1))
     if not np.all(np.diff(grid) > 0):  # the kernel needs an increasing grid
-        cand = sort_by_preference_numpy(candidate_grid(mx, resolution, extra), left_penalty)
-        return cand, grid, np.full(cand.shape, -1, dtype=np.int64)
-    cand, origin = _preferred_kernel(grid, mx, extra, float(left_penalty))
-    return cand, grid, origin
+        return sort_by_preference_numpy(candidate_grid(mx, resolution, extra), left_penalty)
+    return _preferred_kernel(grid, mx, extra, float(left_penalty))
 
 
 def exact_boundary_candidates(own_velocity, rel_position, rel_velocity, valid, radius, lookahead_s):
@@ -340,7 +330,7 @@ def band_search(
             extra = exact_boundary_candidates(vo, r, v, valid, radius, lookahead_s)
         # sorted by preference: |ψ| (+ left_penalty for left turns), then right turn
         # (ψ ≤ 0) first, then original index
-        cand, grid, _ = preferred_candidates_on_grid(mx, resolution, extra, left_penalty)
+        cand = preferred_candidates(mx, resolution, extra, left_penalty)
         usable = ~np.isnan(cand)
         safe = np.where(usable, cand, 0.0)
         ratio0 = cpa_min_ratio(vo, r, v, valid, np.zeros((n, 1)), radius, lookahead_s)[:, 0]

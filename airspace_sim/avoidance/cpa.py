@@ -14,7 +14,9 @@ after sorting the row's candidates by preference (:func:`_sort_row`, the kernel 
 :func:`~airspace_sim.avoidance.bands.preferred_candidates`): the whole fast path of
 :func:`~airspace_sim.avoidance.bands.band_search` but the boundary roots, in one pass and in
 one module (numba's on-disk cache of a kernel does not see edits of helpers in other
-modules). :func:`cpa_min_ratio_turning` judges a candidate as flown at a turn rate. Distances m, velocities m/s, times s, angles rad CCW positive.
+modules). A candidate flown at a turn rate is judged in
+:mod:`~airspace_sim.avoidance.cpa_turning`. Distances m, velocities m/s, times s, angles rad
+CCW positive.
 """
 
 from __future__ import annotations
@@ -53,6 +55,30 @@ def cpa_min_ratio(own_velocity, rel_position, rel_velocity, valid, candidates, r
         np.broadcast_to(np.asarray(radius, dtype=float), valid.shape), requirements=("C", "W")
     )
     return _cpa_kernel(vo, r, v, valid, psi, radius, float(lookahead_s))
+
+
+def cpa_pair_ratios(
+    own_velocity, rel_position, rel_velocity, valid, candidates, radius, lookahead_s
+):
+    """:func:`cpa_min_ratio` of each (ownship, intruder) pair on its own, ``(N, K, C)``:
+    the ratio to intruder ``k`` alone (``inf`` for an invalid slot), each pair a row of
+    the kernel. Arguments as there; ``radius`` a float or an array that broadcasts to
+    ``(N, K)``, m."""
+    valid = np.asarray(valid, dtype=bool)
+    n, k = valid.shape
+    # a writable array, as np.repeat gives: a read-only one (a broadcast view when k = 1)
+    # is another numba type, a second specialisation of the kernel to compile or load
+    rad = np.empty((n * k, 1))
+    rad[:, 0] = np.broadcast_to(np.asarray(radius, dtype=float), (n, k)).reshape(-1)
+    return cpa_min_ratio(
+        np.repeat(own_velocity, k, axis=0),
+        np.reshape(rel_position, (n * k, 1, 2)),
+        np.reshape(rel_velocity, (n * k, 1, 2)),
+        valid.reshape(n * k, 1),
+        np.repeat(candidates, k, axis=0),
+        rad,
+        lookahead_s,
+    ).reshape(n, k, np.shape(candidates)[-1])
 
 
 def cpa_min_ratio_numpy(
@@ -100,10 +126,10 @@ def cpa_min_ratio_numpy(
 
 
 @njit(inline="always", error_model="numpy")
-def _pair_ratio2(vo, r, v, radius, n, k, rvx, rvy, lookahead_s):  # pragma: no cover
-    """(CPA distance over [0, T] / radius)² of ownship ``n`` (velocity turned to
-    ``(rvx, rvy)``) and intruder ``k``: the one formula every kernel here uses, so that
-    they all give the same bits as :func:`cpa_min_ratio_numpy`."""
+def _pair_d2(vo, r, v, n, k, rvx, rvy, lookahead_s):  # pragma: no cover - compiled
+    """(CPA distance over [0, T])², m², of ownship ``n`` (velocity turned to ``(rvx, rvy)``
+    m/s) and intruder ``k``: the one formula every kernel here uses, so that they all
+    give the same bits as :func:`cpa_min_ratio_numpy`."""
     rx, ry = r[n, k, 0], r[n, k, 1]
     vx = (v[n, k, 0] + vo[n, 0]) - rvx
     vy = (v[n, k, 1] + vo[n, 1]) - rvy
@@ -112,7 +138,14 @@ def _pair_ratio2(vo, r, v, radius, n, k, rvx, rvy, lookahead_s):  # pragma: no c
     t = -dot / max(v2, 1e-300)
     t = min(max(t, 0.0), lookahead_s)
     d2 = (t * v2 + 2.0 * dot) * t + (rx * rx + ry * ry)
-    return max(d2, 0.0) * (1.0 / (radius[n, k] * radius[n, k]))
+    return max(d2, 0.0)
+
+
+@njit(inline="always", error_model="numpy")
+def _pair_ratio2(vo, r, v, radius, n, k, rvx, rvy, lookahead_s):  # pragma: no cover
+    """(CPA distance over [0, T] / radius)² of ownship ``n`` and intruder ``k``
+    (:func:`_pair_d2` over ``radius[n, k]²``)."""
+    return _pair_d2(vo, r, v, n, k, rvx, rvy, lookahead_s) * (1.0 / (radius[n, k] * radius[n, k]))
 
 
 @njit(cache=True, error_model="numpy")
@@ -194,15 +227,7 @@ def _row_inverse_r2(radius, valid, n, inv_r2):  # pragma: no cover - compiled
 @njit(inline="always", error_model="numpy")
 def _pair_q2(vo, r, v, inv_r2, n, k, rvx, rvy, lookahead_s):  # pragma: no cover - compiled
     """:func:`_pair_ratio2` with the pair's ``1 / radius²`` from :func:`_row_inverse_r2`."""
-    rx, ry = r[n, k, 0], r[n, k, 1]
-    vx = (v[n, k, 0] + vo[n, 0]) - rvx
-    vy = (v[n, k, 1] + vo[n, 1]) - rvy
-    dot = vx * rx + vy * ry
-    v2 = vx * vx + vy * vy
-    t = -dot / max(v2, 1e-300)
-    t = min(max(t, 0.0), lookahead_s)
-    d2 = (t * v2 + 2.0 * dot) * t + (rx * rx + ry * ry)
-    return max(d2, 0.0) * inv_r2[k]
+    return _pair_d2(vo, r, v, n, k, rvx, rvy, lookahead_s) * inv_r2[k]
 
 
 @njit(cache=True, error_model="numpy")
@@ -238,8 +263,8 @@ def _first_clear_row(
     not C·K. The last intruder that blocked a candidate on the same side (ψ ≤ 0 or ψ > 0,
     ``blockers`` (2,) scratch) is tried first: neighbouring candidates on a side are
     usually blocked by the same one, and the preference order alternates between the
-    sides (one blocker for both sides took 2.3 times the pair evaluations on the
-    1000-aircraft benchmark traffic). An intruder already closer than the threshold
+    sides (one blocker for both sides costs far more pair evaluations; figures in
+    ``docs/performance.md``, "Band search"). An intruder already closer than the threshold
     blocks every heading (for ``t > 0`` the computed ``t·|v|² + 2 r·v`` rounds negative,
     so the computed CPA distance never exceeds the current one, in floating point too):
     such a row has no clear candidate and is not scanned.
@@ -517,6 +542,23 @@ def _sort_row(
     return n_scan
 
 
+@njit(cache=True)
+def _sort_scratch(n_cand):  # pragma: no cover - compiled
+    """The scratch arrays of :func:`_sort_row` for rows of ``n_cand`` candidates:
+    ``usable`` (C,); the entries to sort: value (C,) rad, key (C,), ``ψ > 0`` (C,), index
+    (C,); their permutation (C,); the four tail lists (4, C) and their lengths (4,)."""
+    return (
+        np.empty(n_cand, np.bool_),
+        np.empty(n_cand),
+        np.empty(n_cand),
+        np.empty(n_cand, np.bool_),
+        np.empty(n_cand, np.int64),
+        np.empty(n_cand, np.int64),
+        np.empty((4, n_cand)),
+        np.zeros(4, np.int64),
+    )
+
+
 @njit(cache=True, error_model="numpy")
 def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - compiled
     """Rows of ``[grid (G,), −mx[n], mx[n], extra[n] (E,)]`` (NaN outside ``±mx[n]``), sorted.
@@ -528,24 +570,14 @@ def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - comp
     after an insertion sort by the whole key (a few dozen per row; of an index
     permutation, one move per shift) — which are merged (:func:`_sort_row`). The ``inf``
     and then NaN ``mag`` entries follow in the listing order, which is where the lexsort
-    puts them (every NaN here is the same ``np.nan``). Returns the sorted rows (n_own, C)
-    and the grid index of each entry (−1: not from the grid).
+    puts them (every NaN here is the same ``np.nan``). Returns the sorted rows (n_own, C).
     """
     n_own, n_extra = extra.shape
     n_cand = grid.size + 2 + n_extra
     out = np.empty((n_own, n_cand))
-    origin = np.empty((n_own, n_cand), dtype=np.int64)
+    origin = np.empty(n_cand, np.int64)  # scratch: _sort_row's grid indices, unused here
     all_v, all_m, all_l, all_i = _grid_order(grid, left_penalty)
-    usable = np.empty(n_cand, np.bool_)
-    xv, xm, xl, xi = (
-        np.empty(n_cand),
-        np.empty(n_cand),
-        np.empty(n_cand, np.bool_),
-        np.empty(n_cand, np.int64),
-    )
-    perm = np.empty(n_cand, np.int64)
-    tail = np.empty((4, n_cand))
-    nt = np.zeros(4, np.int64)
+    usable, xv, xm, xl, xi, perm, tail, nt = _sort_scratch(n_cand)
     fv, fm, fl, fi = all_v.copy(), all_m.copy(), all_l.copy(), all_i.copy()
     nf, last = -1, np.nan
     for n in range(n_own):
@@ -564,7 +596,7 @@ def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - comp
             nf,
             grid.size,
             out[n],
-            origin[n],
+            origin,
             usable,
             xv,
             xm,
@@ -574,7 +606,7 @@ def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - comp
             tail,
             nt,
         )
-    return out, origin
+    return out
 
 
 @njit(cache=True, error_model="numpy")
@@ -599,8 +631,9 @@ def band_rows(
     (:func:`_first_clear_row`, clear: ratio ≥ ``threshold``) and, on the sides ``wanted``
     (N, 2) that have none, the best blocked one (:func:`_best_blocked_row`). ``vo`` (N, 2)
     m/s, ``r``, ``v`` (N, K, 2) m and m/s, ``valid`` (N, K), ``lookahead_s`` s, ``mx``
-    (N,) rad, ``grid`` (G,) rad increasing; other arguments as there (``radius`` (N, K); ``extra`` (N, E) the boundary roots, of which
-    row ``n`` uses the first ``n_extra[n]``, the others NaN).
+    (N,) rad, ``grid`` (G,) rad increasing; other arguments as there (``radius`` (N, K)
+    m; ``extra`` (N, E) rad the boundary roots, of which row ``n`` uses the first
+    ``n_extra[n]``, the others NaN).
 
     Returns ``(candidates (N, C), first_clear (N, 3), best_blocked (N, 2), ratio0 (N,))``,
     the arrays of those functions, without the (N, C) origin and usable arrays between
@@ -616,16 +649,7 @@ def band_rows(
     cos_grid, sin_grid = _grid_trig(grid)
     clear2 = _sqrt_threshold(threshold)
     origin = np.empty(n_cand, np.int64)
-    usable = np.empty(n_cand, np.bool_)
-    xv, xm, xl, xi = (
-        np.empty(n_cand),
-        np.empty(n_cand),
-        np.empty(n_cand, np.bool_),
-        np.empty(n_cand, np.int64),
-    )
-    perm = np.empty(n_cand, np.int64)
-    tail = np.empty((4, n_cand))
-    nt = np.zeros(4, np.int64)
+    usable, xv, xm, xl, xi, perm, tail, nt = _sort_scratch(n_cand)
     blockers = np.empty(2, dtype=np.int64)
     inv_r2 = np.empty(n_int)
     cs, sn = np.cos(0.0), np.sin(0.0)
@@ -704,107 +728,3 @@ def band_rows(
                     sin_grid,
                 )
     return cand, first, best, ratio0
-
-
-#: Largest heading change, rad, flown along one straight chord when the turn is modelled
-#: (:func:`cpa_min_ratio_turning`): 15° (the chord's sagitta at 230 m/s and 3°/s is ≈ 40 m).
-TURN_SEGMENT = float(np.radians(15.0))
-
-
-def cpa_min_ratio_turning(
-    own_velocity,
-    rel_position,
-    rel_velocity,
-    valid,
-    candidates,
-    radius,
-    lookahead_s,
-    turn_rate,
-    segment=TURN_SEGMENT,
-):
-    """:func:`cpa_min_ratio` with the ownship turning at ``turn_rate`` until ``ψ`` is reached.
-
-    The ownship flies an arc of radius ``|v_o|/ω`` from its current heading to ``heading + ψ``
-    (taking ``|ψ|/ω`` seconds), then straight; the intruder flies straight. The arc is
-    replaced by chords of at most ``segment`` rad whose end points lie on it, so the relative
-    track is piecewise straight and the minimum distance over ``[0, T]`` is the minimum of
-    each piece's clamped CPA. ``turn_rate`` (N,) rad/s (``inf`` or ≤ 0: instantaneous, the
-    same numbers as :func:`cpa_min_ratio`).
-    """
-    vo = np.ascontiguousarray(own_velocity, dtype=float)
-    valid = np.ascontiguousarray(valid, dtype=bool)
-    r = np.ascontiguousarray(rel_position, dtype=float)
-    v = np.ascontiguousarray(rel_velocity, dtype=float)
-    psi = np.ascontiguousarray(candidates, dtype=float)
-    radius = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, dtype=float), valid.shape))
-    w = np.ascontiguousarray(np.broadcast_to(np.asarray(turn_rate, dtype=float), (vo.shape[0],)))
-    return _cpa_turn_kernel(vo, r, v, valid, psi, radius, float(lookahead_s), w, float(segment))
-
-
-@njit(cache=True, error_model="numpy")
-def _seg_min(rx, ry, vx, vy, t0, t1):  # pragma: no cover - compiled
-    """min over t in [0, t1 − t0] of |r + t v|² (r at the segment start)."""
-    dot = vx * rx + vy * ry
-    v2 = vx * vx + vy * vy
-    t = -dot / max(v2, 1e-300)
-    t = min(max(t, 0.0), t1 - t0)
-    return max((t * v2 + 2.0 * dot) * t + (rx * rx + ry * ry), 0.0)
-
-
-@njit(cache=True, error_model="numpy")
-def _cpa_turn_kernel(vo, r, v, valid, psi, radius, lookahead_s, w, segment):  # pragma: no cover
-    n_own, n_cand = psi.shape
-    n_int = valid.shape[1]
-    out = np.full((n_own, n_cand), np.inf)
-    pts_t = np.empty(64)
-    pts_x = np.empty(64)
-    pts_y = np.empty(64)
-    for n in range(n_own):
-        speed = np.hypot(vo[n, 0], vo[n, 1])
-        h0 = np.arctan2(vo[n, 1], vo[n, 0])
-        for c in range(n_cand):
-            p = psi[n, c]
-            if np.isnan(p) and n_int > 0:
-                out[n, c] = np.nan
-                continue
-            # ownship break points (time, displacement) along the arc, then the end velocity
-            tau = abs(p) / w[n] if (w[n] > 0.0 and np.isfinite(w[n])) else 0.0
-            tau = min(tau, lookahead_s)
-            m = 0
-            if tau > 0.0:
-                m = min(int(np.ceil(abs(p) / segment - 1e-9)), 62)
-                m = max(m, 1)
-            sgn = 1.0 if p > 0 else -1.0
-            pts_t[0], pts_x[0], pts_y[0] = 0.0, 0.0, 0.0
-            for j in range(1, m + 1):
-                tj = tau * j / m
-                if w[n] > 0.0 and np.isfinite(w[n]):
-                    rad = speed / w[n]
-                    hj = h0 + sgn * w[n] * tj
-                    pts_x[j] = sgn * rad * (np.sin(hj) - np.sin(h0))
-                    pts_y[j] = sgn * rad * (np.cos(h0) - np.cos(hj))
-                pts_t[j] = tj
-            cs, sn = np.cos(h0 + p), np.sin(h0 + p)
-            ovx, ovy = speed * cs, speed * sn  # velocity after the turn
-            best = np.inf
-            for k in range(n_int):
-                if not valid[n, k]:
-                    continue
-                vix = v[n, k, 0] + vo[n, 0]
-                viy = v[n, k, 1] + vo[n, 1]
-                d2 = np.inf
-                for j in range(m):
-                    t0, t1 = pts_t[j], pts_t[j + 1]
-                    ax = r[n, k, 0] + vix * t0 - pts_x[j]
-                    ay = r[n, k, 1] + viy * t0 - pts_y[j]
-                    bx = r[n, k, 0] + vix * t1 - pts_x[j + 1]
-                    by = r[n, k, 1] + viy * t1 - pts_y[j + 1]
-                    dt = t1 - t0
-                    d2 = min(d2, _seg_min(ax, ay, (bx - ax) / dt, (by - ay) / dt, t0, t1))
-                ts = pts_t[m]
-                ax = r[n, k, 0] + vix * ts - pts_x[m]
-                ay = r[n, k, 1] + viy * ts - pts_y[m]
-                d2 = min(d2, _seg_min(ax, ay, vix - ovx, viy - ovy, ts, lookahead_s))
-                best = min(best, d2 * (1.0 / (radius[n, k] * radius[n, k])))
-            out[n, c] = np.sqrt(best)
-    return out

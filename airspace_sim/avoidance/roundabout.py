@@ -52,7 +52,8 @@ from airspace_sim.avoidance.bands import (
     exact_boundary_candidates,
     preferred_candidates,
 )
-from airspace_sim.avoidance.cpa import cpa_min_ratio, cpa_min_ratio_turning
+from airspace_sim.avoidance.cpa import cpa_min_ratio
+from airspace_sim.avoidance.cpa_turning import cpa_min_ratio_turning
 from airspace_sim.avoidance.resolvers import BandsResolver, ResolverOutput, _arrays
 from airspace_sim.geometry import rotate, wrap_angle
 from airspace_sim.parts import param

@@ -58,7 +58,7 @@ def turned_path_min_ratio_numpy(
     radius = np.broadcast_to(np.asarray(radius, dtype=float), (n,))
     # a zero turn limit is the straight path (the arc's limit); kept finite for the division
     w = np.maximum(np.broadcast_to(np.asarray(turn_rate, dtype=float), (n,)), 1e-12)
-    t = np.unique(np.append(np.arange(0.0, lookahead_s, step_s), lookahead_s))  # (S,)
+    t = _sample_times(lookahead_s, step_s)  # (S,)
     tau = np.minimum(t, turn_s)
     # intruder displacement from now, (N, K, 3, S, 2), per hypothesis
     disp = np.empty((n, k, 3, t.size, 2))
@@ -88,6 +88,7 @@ def turned_path_min_ratio_numpy(
 
 
 def _sample_times(lookahead_s: float, step_s: float) -> np.ndarray:
+    """The sample times (S,) s: every ``step_s`` from 0, and ``lookahead_s``."""
     return np.unique(np.append(np.arange(0.0, lookahead_s, step_s), lookahead_s))
 
 
@@ -125,7 +126,10 @@ def turned_path_min_ratio(
 
 
 @njit(cache=True)
-def _turned_kernel(vo, r, v, valid, psi, radius, w, t, turn_s):
+def _turned_kernel(vo, r, v, valid, psi, radius, w, t, turn_s):  # pragma: no cover - compiled
+    """:func:`turned_path_min_ratio_numpy`'s formulas per (ownship, candidate, intruder,
+    hypothesis), the minimum over the sample times ``t`` (S,) s kept as a scalar; ``w``
+    (N,) rad/s > 0, ``radius`` (N,) m."""
     n, k = valid.shape
     c_n = psi.shape[1]
     out = np.full((n, k, 3, c_n), np.inf)

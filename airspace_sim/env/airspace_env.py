@@ -47,6 +47,7 @@ from airspace_sim.env import spaces as sp
 from airspace_sim.errors import UserError
 from airspace_sim.world.autopilots import RouteAutopilot
 from airspace_sim.world.bodies import LOS
+from airspace_sim.world.flight import relative_bearings
 from airspace_sim.world.snapshot import live_tracks
 
 RENDER_FPS = 10
@@ -480,14 +481,7 @@ class AirspaceParallelEnv(ParallelEnv):
         ended = ended.tolist()
         nearest = nearest.tolist()
         arrived = done.tolist()
-        time, step = float(w.time), int(w.step_count)
-        cols = zip(
-            w.conflict[sel].tolist(),
-            w.in_los[sel].tolist(),
-            w.nmac[sel].tolist(),
-            w.advice[sel].tolist(),
-            self._route[0][sel].tolist(),
-        )
+        time, step, cols = self._info_columns(sel)
         rewards, terms, truncs, infos = {}, {}, {}, {}
         for k, (a, (c, los, nm, adv, wp)) in enumerate(zip(acting, cols)):
             rewards[a] = total[k]
@@ -563,7 +557,7 @@ class AirspaceParallelEnv(ParallelEnv):
         heading = w.headings[sel]
         _, _, cross, bearing, dist = self._route
         rel_b = np.empty(idx.size)
-        sp.relative_bearings(bearing, idx, heading, rel_b)
+        relative_bearings(bearing, idx, heading, rel_b)
         obs = np.empty((idx.size, lay.size))
         sp.encode_own_rows(
             idx,
@@ -600,12 +594,12 @@ class AirspaceParallelEnv(ParallelEnv):
         obs = sp.finish_in_place(lay, obs)
         return dict(zip(agents, obs))
 
-    def _infos(self, agents, idx) -> dict[str, dict[str, Any]]:
-        """Per-agent info dicts: time s, step, conflict, in_los, nmac, advice rad,
-        waypoint_index (the caller adds reward terms); ``idx`` the agents' aircraft (an
-        index array or a slice)."""
+    def _info_columns(self, idx):
+        """``(time s, step, rows)`` of the info dicts of the aircraft ``idx`` (an index
+        array or a slice): ``rows`` yields per aircraft (conflict, in_los, nmac, advice
+        rad, waypoint_index), the order of :meth:`_infos`' keys (:meth:`step` builds its
+        dicts from them too)."""
         w = self.world
-        time, step = float(w.time), int(w.step_count)
         cols = zip(
             w.conflict[idx].tolist(),
             w.in_los[idx].tolist(),
@@ -613,6 +607,13 @@ class AirspaceParallelEnv(ParallelEnv):
             w.advice[idx].tolist(),
             self._route[0][idx].tolist(),
         )
+        return float(w.time), int(w.step_count), cols
+
+    def _infos(self, agents, idx) -> dict[str, dict[str, Any]]:
+        """Per-agent info dicts: time s, step, conflict, in_los, nmac, advice rad,
+        waypoint_index (the caller adds reward terms); ``idx`` the agents' aircraft (an
+        index array or a slice)."""
+        time, step, cols = self._info_columns(idx)
         return {
             a: {
                 "time": time,

@@ -69,8 +69,6 @@ import numpy as np
 from gymnasium import spaces
 from numba import njit
 
-from airspace_sim.world.flight import wrap
-
 V_REF = 300.0  #: m/s, speed normalisation
 #: discrete action index -> fraction of the turn-rate limit (CCW +): hard left .. hard right
 DISCRETE_LEVELS = (1.0, 0.5, 0.0, -0.5, -1.0)
@@ -245,15 +243,6 @@ def turn_rates_into(frac, idx, max_rate, rates):  # pragma: no cover - compiled
         rates[i] = frac[k] * max_rate[i]
 
 
-@njit(cache=True)
-def relative_bearings(bearing, idx, heading, out):  # pragma: no cover - compiled
-    """``out`` (A,) rad ← ``wrap_angle(bearing[idx] − heading)``: the bearing to the
-    waypoint relative to the heading of each ownship (``bearing`` (N,), ``heading`` (A,)),
-    with :func:`airspace_sim.world.flight.wrap` (numpy's ``wrap_angle`` bit for bit)."""
-    for k in range(idx.size):
-        out[k] = wrap(bearing[idx[k]] - heading[k])
-
-
 def _show(value) -> str:
     """A one-line, bounded rendering of a bad value for an error message."""
     text = repr(value).replace("\n", " ")
@@ -378,7 +367,7 @@ def _intruders_into(
     """:func:`encode_intruders_into`: zero the block, keep the tracks with finite
     ``x[:, :4]``, order them by (ownship, ``hypot`` range, track row) as
     :func:`encode_intruders_batch`'s ``lexsort`` does (a total order: the same rows),
-    then the rows of :func:`_encode_rows` (the same expressions, the rotation computed
+    then the rows of :func:`_encode_rows` (:func:`_intruder_row`, the rotation computed
     once per ownship) written into ``obs``."""
     A = obs.shape[0]
     F = (obs.shape[1] - col0) // K if K > 0 else 0
@@ -426,32 +415,10 @@ def _intruders_into(
             prev, rank = a, 0
         if rank >= K:
             continue
-        # _encode_rows' row, term by term
-        c, s = cos_h[a], sin_h[a]
-        dx, dy = x[t, 0] - own_pos[a, 0], x[t, 2] - own_pos[a, 1]
-        dvx, dvy = x[t, 1] - own_vel[a, 0], x[t, 3] - own_vel[a, 1]
-        px, py = c * dx + s * dy, -s * dx + c * dy
-        vx, vy = c * dvx + s * dvy, -s * dvx + c * dvy
-        pxx, pxy, pyy = P[t, 0, 0], P[t, 0, 2], P[t, 2, 2]
-        var_x = c * c * pxx + 2 * c * s * pxy + s * s * pyy
-        var_y = s * s * pxx - 2 * c * s * pxy + c * c * pyy
-        cov = -c * s * pxx + (c * c - s * s) * pxy + c * s * pyy
-        sx, sy = math.sqrt(max(var_x, 0.0)), math.sqrt(max(var_y, 0.0))
-        rho = cov / (sx * sy) if sx * sy > 0 else 0.0
-        vv = vx * vx + vy * vy
-        tcpa = -(px * vx + py * vy) / vv if vv > 1e-9 else 0.0
-        ahead = max(tcpa, 0.0)
-        b = col0 + rank * F
-        obs[a, b] = 1.0
-        obs[a, b + 1], obs[a, b + 2] = px / rng_, py / rng_
-        obs[a, b + 3], obs[a, b + 4] = vx / (2 * V_REF), vy / (2 * V_REF)
-        obs[a, b + 5] = dist[t] / rng_
-        obs[a, b + 6], obs[a, b + 7] = sx / r_safe, sy / r_safe
-        obs[a, b + 8] = rho
-        obs[a, b + 9] = tcpa / look
-        obs[a, b + 10] = math.hypot(px + vx * ahead, py + vy * ahead) / (2 * r_safe)
-        for k in range(m):
-            obs[a, b + 11 + k] = mu[t, k]
+        _intruder_row(
+            obs[a], col0 + rank * F, t, a, cos_h[a], sin_h[a], x, P, mu, own_pos, own_vel,
+            dist[t], rng_, r_safe, look, m,
+        )  # fmt: skip
         rank += 1
 
 
@@ -469,34 +436,46 @@ def _encode_rows(order, slot, dist, x, P, mu, own_pos, own_vel, heading, rng_, r
             prev, rank = a, 0
         if rank >= K:
             continue
-        c, s = math.cos(heading[a]), math.sin(heading[a])
-        dx, dy = x[t, 0] - own_pos[a, 0], x[t, 2] - own_pos[a, 1]
-        dvx, dvy = x[t, 1] - own_vel[a, 0], x[t, 3] - own_vel[a, 1]
-        # world frame -> body frame (x forward, y left)
-        px, py = c * dx + s * dy, -s * dx + c * dy
-        vx, vy = c * dvx + s * dvy, -s * dvx + c * dvy
-        pxx, pxy, pyy = P[t, 0, 0], P[t, 0, 2], P[t, 2, 2]
-        var_x = c * c * pxx + 2 * c * s * pxy + s * s * pyy
-        var_y = s * s * pxx - 2 * c * s * pxy + c * c * pyy
-        cov = -c * s * pxx + (c * c - s * s) * pxy + c * s * pyy
-        sx, sy = math.sqrt(max(var_x, 0.0)), math.sqrt(max(var_y, 0.0))
-        rho = cov / (sx * sy) if sx * sy > 0 else 0.0
-        # closest point of approach on straight lines
-        vv = vx * vx + vy * vy
-        tcpa = -(px * vx + py * vy) / vv if vv > 1e-9 else 0.0
-        ahead = max(tcpa, 0.0)
-        row = out[a, rank]
-        row[0] = 1.0
-        row[1], row[2] = px / rng_, py / rng_
-        row[3], row[4] = vx / (2 * V_REF), vy / (2 * V_REF)
-        row[5] = dist[t] / rng_
-        row[6], row[7] = sx / r_safe, sy / r_safe
-        row[8] = rho
-        row[9] = tcpa / look
-        row[10] = math.hypot(px + vx * ahead, py + vy * ahead) / (2 * r_safe)
-        for k in range(m):
-            row[11 + k] = mu[t, k]
+        _intruder_row(
+            out[a, rank], 0, t, a, math.cos(heading[a]), math.sin(heading[a]), x, P, mu,
+            own_pos, own_vel, dist[t], rng_, r_safe, look, m,
+        )  # fmt: skip
         rank += 1
+
+
+@njit(inline="always", error_model="numpy")
+def _intruder_row(
+    dst, b, t, a, c, s, x, P, mu, own_pos, own_vel, dist_t, rng_, r_safe, look, m
+):  # pragma: no cover - compiled
+    """Track ``t``'s intruder row for ownship ``a`` into ``dst[b : b + 11 + m]``: ``c``,
+    ``s`` the cos and sin of the ownship's heading, ``dist_t`` the track's range m,
+    ``rng_`` the sensor range m, ``r_safe`` m, ``look`` the look-ahead s, ``m`` the modes
+    written (the one row formula of :func:`_encode_rows` and :func:`_intruders_into`)."""
+    dx, dy = x[t, 0] - own_pos[a, 0], x[t, 2] - own_pos[a, 1]
+    dvx, dvy = x[t, 1] - own_vel[a, 0], x[t, 3] - own_vel[a, 1]
+    # world frame -> body frame (x forward, y left)
+    px, py = c * dx + s * dy, -s * dx + c * dy
+    vx, vy = c * dvx + s * dvy, -s * dvx + c * dvy
+    pxx, pxy, pyy = P[t, 0, 0], P[t, 0, 2], P[t, 2, 2]
+    var_x = c * c * pxx + 2 * c * s * pxy + s * s * pyy
+    var_y = s * s * pxx - 2 * c * s * pxy + c * c * pyy
+    cov = -c * s * pxx + (c * c - s * s) * pxy + c * s * pyy
+    sx, sy = math.sqrt(max(var_x, 0.0)), math.sqrt(max(var_y, 0.0))
+    rho = cov / (sx * sy) if sx * sy > 0 else 0.0
+    # closest point of approach on straight lines
+    vv = vx * vx + vy * vy
+    tcpa = -(px * vx + py * vy) / vv if vv > 1e-9 else 0.0
+    ahead = max(tcpa, 0.0)
+    dst[b] = 1.0
+    dst[b + 1], dst[b + 2] = px / rng_, py / rng_
+    dst[b + 3], dst[b + 4] = vx / (2 * V_REF), vy / (2 * V_REF)
+    dst[b + 5] = dist_t / rng_
+    dst[b + 6], dst[b + 7] = sx / r_safe, sy / r_safe
+    dst[b + 8] = rho
+    dst[b + 9] = tcpa / look
+    dst[b + 10] = math.hypot(px + vx * ahead, py + vy * ahead) / (2 * r_safe)
+    for k in range(m):
+        dst[b + 11 + k] = mu[t, k]
 
 
 @njit(cache=True, error_model="numpy")

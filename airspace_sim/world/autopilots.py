@@ -23,7 +23,7 @@ from airspace_sim.geometry import wrap_angle
 from airspace_sim.parts import Autopilot, NoParams
 from airspace_sim.registry import register
 from airspace_sim.world import streams
-from airspace_sim.world.flight import clip_array_bounds, wrap
+from airspace_sim.world.flight import route_turns
 
 
 @dataclass
@@ -194,8 +194,9 @@ class RouteAutopilot(Autopilot):
 
     def commands(self, state):
         """``(turn_rate, desired_heading)`` (k,) rad/s and rad in one numba pass
-        (:func:`_route_turns`) after numpy's ``arctan2`` of the bearings: the values of
-        :meth:`desired_heading` and ``_toward`` bit for bit. The world reads both."""
+        (:func:`~airspace_sim.world.flight.route_turns`) after numpy's ``arctan2`` of the
+        bearings: the values of :meth:`desired_heading` and ``_toward`` bit for bit. The
+        world reads both."""
         last = self._desired
         if last is not None and last[0] is state and last[2] is not None:
             return last[2], last[1]
@@ -204,7 +205,7 @@ class RouteAutopilot(Autopilot):
         heading_to = np.arctan2(d[:, 1], d[:, 0])
         desired = np.empty(self.members.size)
         rate = np.empty(self.members.size)
-        _route_turns(
+        route_turns(
             heading_to, self._legs.hold, self.heading0, self.members, state.headings,
             state.max_turn_rate, state.dt, desired, rate,
         )  # fmt: skip
@@ -316,21 +317,6 @@ class RouteAutopilot(Autopilot):
             np.where(ahead, bearing, 0.0),
             np.where(ahead, distance, np.nan),
         )
-
-
-@njit(cache=True)
-def _route_turns(
-    heading_to, hold, heading0, members, headings, max_rate, dt, desired, rate
-):  # pragma: no cover - compiled
-    """:meth:`RouteAutopilot.commands` of k members: ``desired`` (k,) rad ← ``heading0``
-    where ``hold`` else numpy's ``heading_to`` (bearing to the target), ``rate`` (k,) rad/s
-    ← ``clip(wrap(desired − heading) / dt, ±max_rate)`` (``_toward``); ``headings`` and
-    ``max_rate`` (N,) indexed by ``members``."""
-    for a in range(members.size):
-        i = members[a]
-        des = heading0[a] if hold[a] else heading_to[a]
-        desired[a] = des
-        rate[a] = clip_array_bounds(wrap(des - headings[i]) / dt, -max_rate[i], max_rate[i])
 
 
 @njit(cache=True)

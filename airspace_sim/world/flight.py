@@ -9,7 +9,9 @@ can differ from numpy's SIMD ``sin`` in the last bit); what the kernels do thems
 IEEE arithmetic, ``%`` (the same ``fmod``-based floored remainder as numpy's
 ``remainder``) and comparisons, with numpy's ``clip`` and ``where`` semantics spelled out.
 ``tests/test_world_flight.py`` holds the numpy statements and checks the kernels against
-them.
+them. Every cached kernel that calls :func:`wrap` or :func:`clip_array_bounds` is in this
+module, the route autopilot's (:func:`route_turns`) and the env's (:func:`relative_bearings`)
+included: numba's on-disk cache of a kernel does not see edits of helpers in other modules.
 """
 
 from __future__ import annotations
@@ -123,3 +125,28 @@ def agent_masks(hr, controlled, avoid, moved, agent, flies_resolver):  # pragma:
         agent[i] = a
         flies_resolver[i] = avoid[i] and not moved[i] and not a
     return inf
+
+
+@njit(cache=True)
+def route_turns(
+    heading_to, hold, heading0, members, headings, max_rate, dt, desired, rate
+):  # pragma: no cover - compiled
+    """:meth:`~airspace_sim.world.autopilots.RouteAutopilot.commands` of k members:
+    ``desired`` (k,) rad ← ``heading0`` where ``hold`` else numpy's ``heading_to`` (bearing
+    to the target), ``rate`` (k,) rad/s ← ``clip(wrap(desired − heading) / dt, ±max_rate)``
+    (the autopilot's ``_toward``); ``headings`` and ``max_rate`` (N,) indexed by
+    ``members``."""
+    for a in range(members.size):
+        i = members[a]
+        des = heading0[a] if hold[a] else heading_to[a]
+        desired[a] = des
+        rate[a] = clip_array_bounds(wrap(des - headings[i]) / dt, -max_rate[i], max_rate[i])
+
+
+@njit(cache=True)
+def relative_bearings(bearing, idx, heading, out):  # pragma: no cover - compiled
+    """``out`` (A,) rad ← ``wrap_angle(bearing[idx] − heading)``: the bearing to the
+    waypoint relative to the heading of each ownship (``bearing`` (N,), ``heading`` (A,)),
+    with :func:`wrap` (numpy's ``wrap_angle`` bit for bit)."""
+    for k in range(idx.size):
+        out[k] = wrap(bearing[idx[k]] - heading[k])

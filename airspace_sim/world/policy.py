@@ -30,7 +30,7 @@ from numba import njit
 
 from airspace_sim.avoidance import resume_heading_change
 from airspace_sim.avoidance.bands import CLEAR_TOLERANCE
-from airspace_sim.avoidance.cpa import cpa_min_ratio
+from airspace_sim.avoidance.cpa import cpa_min_ratio, cpa_pair_ratios
 from airspace_sim.avoidance.resolvers import build_resolver
 from airspace_sim.avoidance.turn_paths import turned_path_min_ratio
 from airspace_sim.tracking.prediction import relative_positions
@@ -218,16 +218,9 @@ class AvoidancePolicy:
         radius = (self.r_safe * wide)[:, None]
         if self.resume_rule in ("no-worse", "diverging", "no-worse-turns"):
             # each (ownship, intruder) pair as its own row of the CPA kernel: (n, K, C)
-            n, k = enc.valid.shape
-            pair = cpa_min_ratio(
-                np.repeat(vo, k, axis=0),
-                enc.rel_position.reshape(n * k, 1, 2),
-                enc.rel_velocity.reshape(n * k, 1, 2),
-                enc.valid.reshape(n * k, 1),
-                np.repeat(psi, k, axis=0),
-                np.repeat(radius, k, axis=0),
-                self.lookahead_s,
-            ).reshape(n, k, -1)
+            pair = cpa_pair_ratios(
+                vo, enc.rel_position, enc.rel_velocity, enc.valid, psi, radius, self.lookahead_s
+            )
             ratio = pair.min(axis=1, initial=np.inf)
             no_conflict = ratio * (wide / base)[:, None] >= 1.0 - CLEAR_TOLERANCE
             if self.resume_rule in ("no-worse", "no-worse-turns"):

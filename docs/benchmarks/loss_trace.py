@@ -44,7 +44,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from resolver_candidates import scenario  # noqa: E402
 
-from airspace_sim.avoidance.cpa import cpa_min_ratio  # noqa: E402
+from airspace_sim.avoidance.cpa import cpa_pair_ratios  # noqa: E402
 from airspace_sim.world import World  # noqa: E402
 from airspace_sim.world.bodies import LOS  # noqa: E402
 from airspace_sim.world.policy import TURN_TOLERANCE  # noqa: E402
@@ -82,15 +82,9 @@ class Recorder:
             return {}
         vo = velocities[enc.owners]
         psi = np.stack([psi_row, np.zeros(n)], axis=1)
-        pair = cpa_min_ratio(
-            np.repeat(vo, k, axis=0),
-            enc.rel_position.reshape(n * k, 1, 2),
-            enc.rel_velocity.reshape(n * k, 1, 2),
-            enc.valid.reshape(n * k, 1),
-            np.repeat(psi, k, axis=0),
-            1.0,
-            pol.lookahead_s,
-        ).reshape(n, k, 2)
+        pair = cpa_pair_ratios(
+            vo, enc.rel_position, enc.rel_velocity, enc.valid, psi, 1.0, pol.lookahead_s
+        )
         r1 = pol.r_safe * (1.0 + pol.margin + pol.resume_margin)
         out = {}
         for a in range(n):
