@@ -25,6 +25,16 @@ import numpy as np
 from numba import njit
 
 
+def kernel_array(value, shape) -> np.ndarray:
+    """``value`` (a float or an array) broadcast to ``shape`` as a C-contiguous, writable
+    float64 array, the one array type the cached kernels are compiled for: numba types a
+    read-only array (a broadcast view, a track view's column) apart, and a second
+    specialisation would be compiled or loaded the first time a caller passed one."""
+    return np.require(
+        np.broadcast_to(np.asarray(value, dtype=float), shape), requirements=("C", "W")
+    )
+
+
 def cpa_min_ratio(own_velocity, rel_position, rel_velocity, valid, candidates, radius, lookahead_s):
     """Minimum over intruders of (CPA distance over ``[0, T]``) / radius, per candidate.
 
@@ -49,11 +59,7 @@ def cpa_min_ratio(own_velocity, rel_position, rel_velocity, valid, candidates, r
     r = np.ascontiguousarray(rel_position, dtype=float)
     v = np.ascontiguousarray(rel_velocity, dtype=float)
     psi = np.ascontiguousarray(candidates, dtype=float)
-    # writable as well as contiguous: numba types a read-only array apart, and a second
-    # specialisation would be compiled (or loaded) the first time a caller passes one
-    radius = np.require(
-        np.broadcast_to(np.asarray(radius, dtype=float), valid.shape), requirements=("C", "W")
-    )
+    radius = kernel_array(radius, valid.shape)
     return _cpa_kernel(vo, r, v, valid, psi, radius, float(lookahead_s))
 
 
@@ -66,10 +72,7 @@ def cpa_pair_ratios(
     ``(N, K)``, m."""
     valid = np.asarray(valid, dtype=bool)
     n, k = valid.shape
-    # a writable array, as np.repeat gives: a read-only one (a broadcast view when k = 1)
-    # is another numba type, a second specialisation of the kernel to compile or load
-    rad = np.empty((n * k, 1))
-    rad[:, 0] = np.broadcast_to(np.asarray(radius, dtype=float), (n, k)).reshape(-1)
+    rad = kernel_array(radius, (n, k)).reshape(n * k, 1)
     return cpa_min_ratio(
         np.repeat(own_velocity, k, axis=0),
         np.reshape(rel_position, (n * k, 1, 2)),

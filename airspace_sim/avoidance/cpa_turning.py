@@ -11,6 +11,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from airspace_sim.avoidance.cpa import kernel_array
+
 #: Largest heading change, rad, flown along one straight chord when the turn is modelled
 #: (:func:`cpa_min_ratio_turning`): 15° (the chord's sagitta at 230 m/s and 3°/s is ≈ 40 m).
 TURN_SEGMENT = float(np.radians(15.0))
@@ -42,8 +44,8 @@ def cpa_min_ratio_turning(
     r = np.ascontiguousarray(rel_position, dtype=float)
     v = np.ascontiguousarray(rel_velocity, dtype=float)
     psi = np.ascontiguousarray(candidates, dtype=float)
-    radius = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, dtype=float), valid.shape))
-    w = np.ascontiguousarray(np.broadcast_to(np.asarray(turn_rate, dtype=float), (vo.shape[0],)))
+    radius = kernel_array(radius, valid.shape)
+    w = kernel_array(turn_rate, (vo.shape[0],))
     return _cpa_turn_kernel(vo, r, v, valid, psi, radius, float(lookahead_s), w, float(segment))
 
 

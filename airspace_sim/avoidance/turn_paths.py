@@ -23,6 +23,8 @@ import math
 import numpy as np
 from numba import njit
 
+from airspace_sim.avoidance.cpa import kernel_array
+
 #: the three intruder hypotheses, in the order of the ``M`` axis
 HYPOTHESES = ("straight", "left", "right")
 
@@ -116,7 +118,7 @@ def turned_path_min_ratio(
         np.ascontiguousarray(rel_velocity, dtype=float),
         np.ascontiguousarray(valid, dtype=np.bool_),
         np.ascontiguousarray(candidates, dtype=float),
-        np.ascontiguousarray(np.broadcast_to(np.asarray(radius, dtype=float), (n,))),
+        kernel_array(radius, (n,)),
         np.ascontiguousarray(
             np.maximum(np.broadcast_to(np.asarray(turn_rate, dtype=float), (n,)), 1e-12)
         ),
