@@ -461,6 +461,38 @@ def test_first_clear_search_equals_the_full_band(seed):  # noqa: D103
         np.testing.assert_array_equal(full.best_blocked[rows, col], np.argmax(score[rows], axis=1))
 
 
+@pytest.mark.parametrize("left_penalty", [0.0, RES, 0.25, np.inf])
+def test_fast_rows_equal_the_full_band_at_odd_limits(left_penalty):
+    """The fast path's rows (packed roots, the sort's bucket placement, origin and usable
+    written only up to the last usable entry) equal the full path's at zero, tiny, mixed
+    and ±π limits and at any left penalty: the same sorted candidates, first clear, best
+    blocked and choice. At infinite limits the sorted candidates (±inf among them) too;
+    there the paths judge ψ = ±inf differently (NaN ratios: clear in the full kernel's
+    running minimum, blocked in the scans), so only the candidates are compared."""
+    rng = np.random.default_rng(11)
+    n, k = 240, 10
+    heading = rng.uniform(-np.pi, np.pi, n)
+    vo = 230.0 * np.stack([np.cos(heading), np.sin(heading)], axis=1)
+    r = rng.uniform(-25000.0, 25000.0, (n, k, 2))
+    vi = rng.uniform(-300.0, 300.0, (n, k, 2))
+    valid = rng.random((n, k)) < 0.8
+    mx = np.radians(rng.choice([0.0, 1e-9, 0.5, 1.0, 7.3, 45.0, 90.0, 180.0], n))
+    for lims in (mx, np.where(np.arange(n) % 7 == 0, np.inf, mx)):
+        args = (vo, r, vi - vo[:, None], valid, lims, 3000.0, 120.0, 0.1)
+        kw = dict(left_penalty=left_penalty)
+        with np.errstate(invalid="ignore"):
+            full = band_search(*args, **kw)
+            fast = band_search(*args, full=False, **kw)
+        assert np.array_equal(fast.candidates, full.candidates, equal_nan=True)
+        assert np.array_equal(np.signbit(fast.candidates), np.signbit(full.candidates))
+        if np.isinf(lims).any():
+            assert np.isinf(fast.candidates).any()  # the infinite limits' ±inf are there
+            continue
+        np.testing.assert_array_equal(fast.first_clear, full.first_clear)
+        np.testing.assert_array_equal(fast.best_blocked, full.best_blocked)
+        np.testing.assert_array_equal(fast.heading_change, full.heading_change)
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_boundary_kernel_gives_the_numpy_candidates_choices(seed, monkeypatch):
     """band_search with the numba boundary kernel makes the same choices as with the numpy

@@ -426,16 +426,43 @@ def _key_less(am, al, ai, bm, bl, bi):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def _grid_inside(lim, all_v, all_m, all_l, all_i, fv, fm, fl, fi):  # pragma: no cover
+def _grid_inside(lim, all_v, all_m, all_l, all_i, fv, fm, fl, fi, gstart):  # pragma: no cover
     """The grid entries with ``|ψ| ≤ lim``, in the grid's preference order
-    (:func:`_grid_order`'s arrays), into ``fv``, ``fm``, ``fl``, ``fi``; returns their
-    number. Rows of one limit share them (the callers keep the last limit's)."""
+    (:func:`_grid_order`'s arrays), into ``fv``, ``fm``, ``fl``, ``fi``, and their
+    buckets of key (:func:`_bucket`): ``gstart[b]`` (≥ nb + 1 entries) the first entry of
+    bucket ``b`` or later. Returns ``(nf, inv_w, nb)``: their number and the buckets'
+    scale and count. Rows of one limit share them (the callers keep the last limit's)."""
     nf = 0
     for q in range(all_v.size):
         if abs(all_v[q]) <= lim:
             fv[nf], fm[nf], fl[nf], fi[nf] = all_v[q], all_m[q], all_l[q], all_i[q]
             nf += 1
-    return nf
+    # about two grid entries a bucket (±kΔ share a key without left_penalty)
+    nb = max(nf // 2, 1)
+    top = fm[nf - 1] if nf > 0 else 0.0
+    inv_w = nb / top if top > 0.0 else 0.0
+    if not inv_w < np.inf:  # an infinite key (left_penalty = inf) or a denormal top
+        inv_w = 0.0
+    q = 0
+    for b in range(nb + 1):
+        while q < nf and _bucket(fm[q], inv_w, nb) < b:
+            q += 1
+        gstart[b] = q
+    return nf, inv_w, nb
+
+
+@njit(inline="always")
+def _bucket(m, inv_w, nb):  # pragma: no cover - compiled
+    """Bucket ``0 … nb − 1`` of a sort key ``m`` (the ``mag`` of :func:`_key_less`, not
+    NaN), for a finite scale ``inv_w`` ≥ 0: a non-decreasing function of ``m`` (the
+    rounded product is monotone, and so are the truncation and the clamps), so an entry
+    of a lower bucket has the smaller ``mag``."""
+    x = m * inv_w
+    if x < 1.0:
+        return 0
+    if x < nb:
+        return int(x)
+    return nb - 1
 
 
 @njit(inline="always")
@@ -455,6 +482,9 @@ def _sort_row(
     fl,
     fi,
     nf,
+    gstart,
+    inv_w,
+    nb,
     n_grid,
     out,
     origin,
@@ -463,17 +493,30 @@ def _sort_row(
     xm,
     xl,
     xi,
+    xb,
     perm,
+    count,
     tail,
     nt,
 ):  # pragma: no cover - compiled
     """One row of :func:`_preferred_kernel` into ``out`` (C,), with ``origin`` (C,) (grid
-    index or −1) and ``usable`` (C,) (not NaN). ``fv``, ``fm``, ``fl``, ``fi``: the first
+    index or −1) and ``usable`` (C,) (not NaN) up to the returned count. ``fv``, ``fm``, ``fl``, ``fi``: the first
     ``nf`` of them the entries of the ``n_grid`` grid inside the row's limit, in
-    preference order (:func:`_grid_inside`); the other arrays are scratch. Only the
-    first ``n_used`` extras are read, the others taken as NaN (the boundary roots packed
-    by :func:`~airspace_sim.avoidance.heading.boundary_roots_in_window`). Returns the
-    number of leading entries that hold every usable one."""
+    preference order, and ``gstart`` their ``nb`` buckets of scale ``inv_w``
+    (:func:`_grid_inside`); the other arrays are scratch. Only the first ``n_used``
+    extras are read, the others taken as NaN (the boundary roots packed by
+    :func:`~airspace_sim.avoidance.heading.boundary_roots_in_window`). Returns the number
+    of leading entries that hold every usable one.
+
+    The limits and extras inside the limit are sorted by bucket of their key
+    (:func:`_bucket`, a counting sort), then by the whole key within a bucket (an
+    insertion sort that has nothing to move across buckets); each one's rank among the
+    grid's run is the grid entries of lower buckets and those of its own bucket with a
+    smaller key, and grid entry ``q`` moves up by the number of ranks ≤ ``q``: two
+    straight loops instead of a merge's unpredictable branches (figures in
+    ``docs/performance.md``). Every key differs (the index is part of it), so this is the
+    one sorted order, the lexsort's.
+    """
     n_extra = extra_row.size
     lim = _row_limit(mx_n)
     # the limits and extras of finite mag (inside the limit) to sort; the others into the
@@ -482,6 +525,7 @@ def _sort_row(
     # finite, so its entries of the first list are all NaN: the unread ones go last.
     nx = 0
     nt[:] = 0
+    count[: nb + 1] = 0
     for j in range(n_grid, n_grid + 2 + n_used):
         if j == n_grid:
             c = -mx_n
@@ -494,18 +538,22 @@ def _sort_row(
         left = c > 0.0
         g = np.inf if np.isnan(c) else abs(c) + (left_penalty if left else 0.0)
         if g < np.inf:
-            xv[nx], xm[nx], xl[nx], xi[nx] = c, g, left, j
+            b = _bucket(g, inv_w, nb)
+            xv[nx], xm[nx], xl[nx], xi[nx], xb[nx] = c, g, left, j, b
+            count[b + 1] += 1
             nx += 1
         else:
             q = (0 if g == np.inf else 2) + (1 if left else 0)
             tail[q, nt[q]] = c
             nt[q] += 1
-    for _ in range(n_extra - n_used):
-        tail[0, nt[0]] = np.nan
-        nt[0] += 1
-    # insertion sort of an index permutation by the whole key (a few dozen entries)
-    for i in range(nx):
-        perm[i] = i
+    # counting sort by bucket (count[b] becomes the start of bucket b's entries) ...
+    for b in range(nb):
+        count[b + 1] += count[b]
+    for x in range(nx):
+        b = xb[x]
+        perm[count[b]] = x
+        count[b] += 1
+    # ... then by the whole key inside each bucket (a lower bucket has the smaller key)
     for i in range(1, nx):
         p = perm[i]
         g, lf, ix = xm[p], xl[p], xi[p]
@@ -517,31 +565,43 @@ def _sort_row(
             perm[k + 1] = q
             k -= 1
         perm[k + 1] = p
-    # merge the grid's entries inside the limit (in the grid's order) with them
-    q = i = o = 0
-    while q < nf or i < nx:
-        if i >= nx or (
-            q < nf and _key_less(fm[q], fl[q], fi[q], xm[perm[i]], xl[perm[i]], xi[perm[i]])
-        ):
-            out[o], origin[o] = fv[q], fi[q]
-            q += 1
-        else:
-            out[o], origin[o] = xv[perm[i]], -1
-            i += 1
-        usable[o] = True
-        o += 1
+    # each entry's place: after the grid's entries of lower buckets and the smaller ones
+    # of its own (``rank``, the grid entries before it); grid entry q then has the
+    # entries of rank ≤ q before it (``count`` reused for the ranks' histogram)
+    count[: nf + 1] = 0
+    for i in range(nx):
+        p = perm[i]
+        b = xb[p]
+        g, lf, ix = xm[p], xl[p], xi[p]
+        rank = gstart[b]
+        end = gstart[b + 1]
+        while rank < end and _key_less(fm[rank], fl[rank], fi[rank], g, lf, ix):
+            rank += 1
+        count[rank] += 1
+        out[i + rank], origin[i + rank], usable[i + rank] = xv[p], -1, True
+    before = 0
+    for q in range(nf):
+        before += count[q]
+        out[q + before], origin[q + before], usable[q + before] = fv[q], fi[q], True
+    o = nf + nx
     n_scan = o
+    # the tail: NaN but for an infinite limit's ±inf, so origin and usable are written
+    # only up to the last usable entry (the scans read no further)
     for t in range(4):
-        if t == 2:
-            for _ in range(n_grid - nf):
-                out[o], origin[o], usable[o] = np.nan, -1, False
-                o += 1
+        if t == 1:
+            out[o : o + n_extra - n_used] = np.nan
+            o += n_extra - n_used
+        elif t == 2:
+            out[o : o + n_grid - nf] = np.nan
+            o += n_grid - nf
         for e in range(nt[t]):
             c = tail[t, e]
-            out[o], origin[o], usable[o] = c, -1, not np.isnan(c)
+            out[o] = c
             o += 1
-            if usable[o - 1]:
+            if not np.isnan(c):
                 n_scan = o
+    for e in range(nf + nx, n_scan):
+        origin[e], usable[e] = -1, not np.isnan(out[e])
     return n_scan
 
 
@@ -549,7 +609,8 @@ def _sort_row(
 def _sort_scratch(n_cand):  # pragma: no cover - compiled
     """The scratch arrays of :func:`_sort_row` for rows of ``n_cand`` candidates:
     ``usable`` (C,); the entries to sort: value (C,) rad, key (C,), ``ψ > 0`` (C,), index
-    (C,); their permutation (C,); the four tail lists (4, C) and their lengths (4,)."""
+    (C,), bucket (C,); their permutation (C,); the bucket counts (C + 2,); the four tail
+    lists (4, C) and their lengths (4,); the grid's bucket starts (C + 2,)."""
     return (
         np.empty(n_cand, np.bool_),
         np.empty(n_cand),
@@ -557,8 +618,11 @@ def _sort_scratch(n_cand):  # pragma: no cover - compiled
         np.empty(n_cand, np.bool_),
         np.empty(n_cand, np.int64),
         np.empty(n_cand, np.int64),
+        np.empty(n_cand, np.int64),
+        np.empty(n_cand + 2, np.int64),
         np.empty((4, n_cand)),
         np.zeros(4, np.int64),
+        np.empty(n_cand + 2, np.int64),
     )
 
 
@@ -570,8 +634,8 @@ def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - comp
     The entries of finite ``mag`` form two runs already sorted by that key — the grid's
     (its order computed once for the whole grid, ``grid`` increasing, :func:`_grid_order`;
     a row keeps the entries inside its limit in that order) and the limits and extras
-    after an insertion sort by the whole key (a few dozen per row; of an index
-    permutation, one move per shift) — which are merged (:func:`_sort_row`). The ``inf``
+    sorted by bucket of key and then by the whole key (a few dozen per row), each placed
+    among the grid's by its bucket (:func:`_sort_row`). The ``inf``
     and then NaN ``mag`` entries follow in the listing order, which is where the lexsort
     puts them (every NaN here is the same ``np.nan``). Returns the sorted rows (n_own, C).
     """
@@ -580,13 +644,14 @@ def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - comp
     out = np.empty((n_own, n_cand))
     origin = np.empty(n_cand, np.int64)  # scratch: _sort_row's grid indices, unused here
     all_v, all_m, all_l, all_i = _grid_order(grid, left_penalty)
-    usable, xv, xm, xl, xi, perm, tail, nt = _sort_scratch(n_cand)
+    usable, xv, xm, xl, xi, xb, perm, count, tail, nt, gstart = _sort_scratch(n_cand)
     fv, fm, fl, fi = all_v.copy(), all_m.copy(), all_l.copy(), all_i.copy()
-    nf, last = -1, np.nan
+    nf, inv_w, nb, last = -1, 0.0, 1, np.nan
     for n in range(n_own):
         lim = _row_limit(mx[n])
         if nf < 0 or not lim == last:
-            nf, last = _grid_inside(lim, all_v, all_m, all_l, all_i, fv, fm, fl, fi), lim
+            nf, inv_w, nb = _grid_inside(lim, all_v, all_m, all_l, all_i, fv, fm, fl, fi, gstart)
+            last = lim
         _sort_row(
             mx[n],
             extra[n],
@@ -597,6 +662,9 @@ def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - comp
             fl,
             fi,
             nf,
+            gstart,
+            inv_w,
+            nb,
             grid.size,
             out[n],
             origin,
@@ -605,7 +673,9 @@ def _preferred_kernel(grid, mx, extra, left_penalty):  # pragma: no cover - comp
             xm,
             xl,
             xi,
+            xb,
             perm,
+            count,
             tail,
             nt,
         )
@@ -652,12 +722,12 @@ def band_rows(
     cos_grid, sin_grid = _grid_trig(grid)
     clear2 = _sqrt_threshold(threshold)
     origin = np.empty(n_cand, np.int64)
-    usable, xv, xm, xl, xi, perm, tail, nt = _sort_scratch(n_cand)
+    usable, xv, xm, xl, xi, xb, perm, count, tail, nt, gstart = _sort_scratch(n_cand)
     blockers = np.empty(2, dtype=np.int64)
     inv_r2 = np.empty(n_int)
     cs, sn = np.cos(0.0), np.sin(0.0)
     fv, fm, fl, fi = all_v.copy(), all_m.copy(), all_l.copy(), all_i.copy()
-    nf, last = -1, np.nan
+    nf, inv_w, nb, last = -1, 0.0, 1, np.nan
     for n in range(n_own):
         # _cpa_kernel at ψ = 0, its operations in its order
         rvx = cs * vo[n, 0] - sn * vo[n, 1]
@@ -670,7 +740,8 @@ def band_rows(
         _row_inverse_r2(radius, valid, n, inv_r2)
         lim = _row_limit(mx[n])
         if nf < 0 or not lim == last:
-            nf, last = _grid_inside(lim, all_v, all_m, all_l, all_i, fv, fm, fl, fi), lim
+            nf, inv_w, nb = _grid_inside(lim, all_v, all_m, all_l, all_i, fv, fm, fl, fi, gstart)
+            last = lim
         n_scan = _sort_row(
             mx[n],
             extra[n],
@@ -681,6 +752,9 @@ def band_rows(
             fl,
             fi,
             nf,
+            gstart,
+            inv_w,
+            nb,
             grid.size,
             cand[n],
             origin,
@@ -689,7 +763,9 @@ def band_rows(
             xm,
             xl,
             xi,
+            xb,
             perm,
+            count,
             tail,
             nt,
         )
