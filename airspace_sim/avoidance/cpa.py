@@ -129,13 +129,15 @@ def cpa_min_ratio_numpy(
 
 
 @njit(inline="always", error_model="numpy")
-def _pair_d2(vo, r, v, n, k, rvx, rvy, lookahead_s):  # pragma: no cover - compiled
-    """(CPA distance over [0, T])², m², of ownship ``n`` (velocity turned to ``(rvx, rvy)``
-    m/s) and intruder ``k``: the one formula every kernel here uses, so that they all
-    give the same bits as :func:`cpa_min_ratio_numpy`."""
-    rx, ry = r[n, k, 0], r[n, k, 1]
-    vx = (v[n, k, 0] + vo[n, 0]) - rvx
-    vy = (v[n, k, 1] + vo[n, 1]) - rvy
+def _cpa_d2(rx, ry, wx, wy, rvx, rvy, lookahead_s):  # pragma: no cover - compiled
+    """(CPA distance over [0, T])², m², of an intruder at ``(rx, ry)`` m (relative)
+    flying ``(wx, wy)`` m/s (world frame) against an own velocity turned to
+    ``(rvx, rvy)`` m/s: the one formula every kernel here uses, so that they all give
+    the same bits as :func:`cpa_min_ratio_numpy`. Scalar arguments only: an inline
+    helper that takes arrays reference-counts them on every call (atomic operations in
+    the scans' innermost loops)."""
+    vx = wx - rvx
+    vy = wy - rvy
     dot = vx * rx + vy * ry
     v2 = vx * vx + vy * vy
     t = -dot / max(v2, 1e-300)
@@ -145,10 +147,9 @@ def _pair_d2(vo, r, v, n, k, rvx, rvy, lookahead_s):  # pragma: no cover - compi
 
 
 @njit(inline="always", error_model="numpy")
-def _pair_ratio2(vo, r, v, radius, n, k, rvx, rvy, lookahead_s):  # pragma: no cover
-    """(CPA distance over [0, T] / radius)² of ownship ``n`` and intruder ``k``
-    (:func:`_pair_d2` over ``radius[n, k]²``)."""
-    return _pair_d2(vo, r, v, n, k, rvx, rvy, lookahead_s) * (1.0 / (radius[n, k] * radius[n, k]))
+def _cpa_ratio2(rx, ry, wx, wy, rvx, rvy, lookahead_s, radius):  # pragma: no cover
+    """(CPA distance over [0, T] / radius)²: :func:`_cpa_d2` over ``radius²`` m²."""
+    return _cpa_d2(rx, ry, wx, wy, rvx, rvy, lookahead_s) * (1.0 / (radius * radius))
 
 
 @njit(cache=True, error_model="numpy")
@@ -169,7 +170,11 @@ def _cpa_kernel(vo, r, v, valid, psi, radius, lookahead_s):  # pragma: no cover 
             for k in range(n_int):
                 if not valid[n, k]:
                     continue
-                best = min(best, _pair_ratio2(vo, r, v, radius, n, k, rvx, rvy, lookahead_s))
+                wx, wy = v[n, k, 0] + vo[n, 0], v[n, k, 1] + vo[n, 1]
+                q2 = _cpa_ratio2(
+                    r[n, k, 0], r[n, k, 1], wx, wy, rvx, rvy, lookahead_s, radius[n, k]
+                )
+                best = min(best, q2)
             out[n, c] = np.sqrt(best)
     return out
 
@@ -182,17 +187,6 @@ def _grid_trig(grid):  # pragma: no cover - compiled
     for g in range(grid.size):
         cs[g], sn[g] = np.cos(grid[g]), np.sin(grid[g])
     return cs, sn
-
-
-@njit(inline="always", error_model="numpy")
-def _turned(vo, n, p, g, cos_grid, sin_grid):  # pragma: no cover - compiled
-    """Own velocity of ownship ``n`` turned by ``p`` rad; ``g`` ≥ 0: ``p`` is the grid's
-    ``g``-th value, whose cos and sin are in the tables (the same bits)."""
-    if g >= 0:
-        cs, sn = cos_grid[g], sin_grid[g]
-    else:
-        cs, sn = np.cos(p), np.sin(p)
-    return cs * vo[n, 0] - sn * vo[n, 1], sn * vo[n, 0] + cs * vo[n, 1]
 
 
 def clear_ratio2(threshold: float) -> float:
@@ -221,16 +215,10 @@ def _sqrt_threshold(t):  # pragma: no cover - compiled
 @njit(inline="always", error_model="numpy")
 def _row_inverse_r2(radius, valid, n, inv_r2):  # pragma: no cover - compiled
     """``inv_r2[k] = 1 / radius[n, k]²`` for the valid slots of row ``n`` (the factor
-    :func:`_pair_ratio2` computes per pair, once per row: the same bits)."""
+    :func:`_cpa_ratio2` computes per pair, once per row: the same bits)."""
     for k in range(valid.shape[1]):
         if valid[n, k]:
             inv_r2[k] = 1.0 / (radius[n, k] * radius[n, k])
-
-
-@njit(inline="always", error_model="numpy")
-def _pair_q2(vo, r, v, inv_r2, n, k, rvx, rvy, lookahead_s):  # pragma: no cover - compiled
-    """:func:`_pair_ratio2` with the pair's ``1 / radius²`` from :func:`_row_inverse_r2`."""
-    return _pair_d2(vo, r, v, n, k, rvx, rvy, lookahead_s) * inv_r2[k]
 
 
 @njit(cache=True, error_model="numpy")
@@ -274,10 +262,11 @@ def _first_clear_row(
     """
     out[0] = out[1] = out[2] = -1
     n_int = valid.shape[1]
+    vox, voy = vo[n, 0], vo[n, 1]
     for k in range(n_int):
         if valid[n, k]:
             rx, ry = r[n, k, 0], r[n, k, 1]
-            # the current (distance / radius)², _pair_q2 at t = 0
+            # the current (distance / radius)², _cpa_d2 at t = 0
             if not (max(rx * rx + ry * ry, 0.0) * inv_r2[k] >= clear2):
                 return
     blockers[0] = blockers[1] = -1
@@ -290,7 +279,12 @@ def _first_clear_row(
             if out[0] >= 0 and out[1] >= 0 and out[2] >= 0:
                 break
             continue
-        rvx, rvy = _turned(vo, n, p, origin[c], cos_grid, sin_grid)
+        g = origin[c]
+        if g >= 0:
+            cs, sn = cos_grid[g], sin_grid[g]
+        else:
+            cs, sn = np.cos(p), np.sin(p)
+        rvx, rvy = cs * vox - sn * voy, sn * vox + cs * voy
         clear = True
         sd = 0 if p <= 0.0 else 1
         blocker = blockers[sd]
@@ -298,7 +292,19 @@ def _first_clear_row(
             k = blocker if j < 0 else j
             if k < 0 or (j >= 0 and k == blocker) or not valid[n, k]:
                 continue
-            if not (_pair_q2(vo, r, v, inv_r2, n, k, rvx, rvy, lookahead_s) >= clear2):
+            if not (
+                _cpa_d2(
+                    r[n, k, 0],
+                    r[n, k, 1],
+                    v[n, k, 0] + vox,
+                    v[n, k, 1] + voy,
+                    rvx,
+                    rvy,
+                    lookahead_s,
+                )
+                * inv_r2[k]
+                >= clear2
+            ):
                 clear = False
                 blockers[sd] = k
                 break
@@ -343,6 +349,7 @@ def _best_blocked_row(
     choice as the full evaluation.
     """
     n_int = valid.shape[1]
+    vox, voy = vo[n, 0], vo[n, 1]
     res = -1
     best = -np.inf
     guess = -1
@@ -360,7 +367,12 @@ def _best_blocked_row(
         p = psi[c]
         if (side == 0 and p > 0.0) or (side == 1 and p < 0.0):
             continue
-        rvx, rvy = _turned(vo, n, p, origin[c], cos_grid, sin_grid)
+        g = origin[c]
+        if g >= 0:
+            cs, sn = cos_grid[g], sin_grid[g]
+        else:
+            cs, sn = np.cos(p), np.sin(p)
+        rvx, rvy = cs * vox - sn * voy, sn * vox + cs * voy
         m2 = np.inf
         m = np.inf
         arg = -1
@@ -368,7 +380,18 @@ def _best_blocked_row(
             k = guess if j < 0 else j
             if k < 0 or (j >= 0 and k == guess) or not valid[n, k]:
                 continue
-            q2 = _pair_q2(vo, r, v, inv_r2, n, k, rvx, rvy, lookahead_s)
+            q2 = (
+                _cpa_d2(
+                    r[n, k, 0],
+                    r[n, k, 1],
+                    v[n, k, 0] + vox,
+                    v[n, k, 1] + voy,
+                    rvx,
+                    rvy,
+                    lookahead_s,
+                )
+                * inv_r2[k]
+            )
             if q2 < m2:
                 m2 = q2
                 m = np.sqrt(q2)
@@ -735,7 +758,11 @@ def band_rows(
         b = np.inf
         for k in range(n_int):
             if valid[n, k]:
-                b = min(b, _pair_ratio2(vo, r, v, radius, n, k, rvx, rvy, lookahead_s))
+                wx, wy = v[n, k, 0] + vo[n, 0], v[n, k, 1] + vo[n, 1]
+                q2 = _cpa_ratio2(
+                    r[n, k, 0], r[n, k, 1], wx, wy, rvx, rvy, lookahead_s, radius[n, k]
+                )
+                b = min(b, q2)
         ratio0[n] = np.sqrt(b)
         _row_inverse_r2(radius, valid, n, inv_r2)
         lim = _row_limit(mx[n])
