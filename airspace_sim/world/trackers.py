@@ -170,6 +170,15 @@ class ImmTracker(parts.Tracker):
     def birth(self, x0, P0) -> np.ndarray:
         return self.imm.birth(x0, P0, self._mu0)
 
+    def birth_checked(self, x0, P0) -> np.ndarray:
+        if not self.__dict__.get("_mu0_checked"):  # mu0's checks, once (they only raise)
+            self.imm._initial(np.zeros((1, self.imm.n)), np.eye(self.imm.n), self._mu0, "")
+            self._mu0_checked = True
+        # the rows of mu0 as SlotIMM._initial makes them (the same numpy operations)
+        mu0 = np.broadcast_to(np.array(self._mu0, dtype=float), (x0.shape[0], self.n_modes))
+        mu0 = mu0.copy()
+        return self.imm.birth_checked(x0, P0, np.ascontiguousarray(mu0 / mu0.sum(axis=1)[:, None]))
+
     def drop(self, slots) -> None:
         self.imm.drop(slots)
 
@@ -529,9 +538,11 @@ class TrackTable:
         self._owner[slots] = 0
         self._intruder[slots] = 0
 
-    def _start(self, keys: np.ndarray, x0, P0) -> None:
-        """Start tracks for the (sorted, new) ``keys`` (k,) from x0 (k, 5), P0 (k, 5, 5)."""
-        slots = np.asarray(self.tracker.birth(x0, P0), dtype=np.int64)
+    def _start(self, keys: np.ndarray, x0, P0, checked: bool = False) -> None:
+        """Start tracks for the (sorted, new) ``keys`` (k,) from x0 (k, 5), P0 (k, 5, 5)
+        (``checked``: through :meth:`parts.Tracker.birth_checked`)."""
+        t = self.tracker
+        slots = np.asarray(t.birth_checked(x0, P0) if checked else t.birth(x0, P0), np.int64)
         cap = self.tracker.capacity
         if self._owner.size < cap:
             for name in ("_owner", "_intruder", "_misses", "_age"):
@@ -546,6 +557,35 @@ class TrackTable:
         self._index.put(keys, slots)
 
     def _births(self, time, keys, z, truth_states) -> None:
+        """The detections without a track, keys (k,) and z (k, 2): a second detection
+        within the pending window starts a track, the others are (or refresh) pending.
+        One numba pass over the sorted keys and the pending detections
+        (:func:`_pending_births`); where that declines (repeated keys, a pending detection
+        not older than ``time``, initial covariances near the limits of the checks it
+        leaves out), :meth:`_births_reference`, the same rule in numpy."""
+        if self.tracker.uses_truth:
+            self._births_reference(time, keys, z, truth_states)
+            return
+        order = np.argsort(keys, kind="stable")
+        keys, z = keys[order], np.ascontiguousarray(z[order])
+        k, n_pend = keys.size, self._pend_key.size
+        start = np.empty(k, np.int64)
+        x0, P0 = np.empty((k, 5)), np.empty((k, 5, 5))
+        pend = (np.empty(n_pend + k, np.int64), np.empty((n_pend + k, 2)), np.empty(n_pend + k))
+        n_start, n_new = _pending_births(
+            float(time), self.drop_after * self.scan_period_s + 1e-9, keys, z,
+            self._pend_key, self._pend_z, self._pend_t, max(self.sigma, 1.0) ** 2,
+            self._omega_var, MANOEUVRE_VELOCITY_VAR, start, x0, P0, *pend,
+        )  # fmt: skip
+        if n_start < 0:
+            self._births_reference(time, keys, z, truth_states)
+            return
+        if n_start:
+            self._start(start[:n_start], x0[:n_start], P0[:n_start], checked=True)
+        self._pend_key, self._pend_z, self._pend_t = (a[:n_new] for a in pend)
+
+    def _births_reference(self, time, keys, z, truth_states) -> None:
+        """:meth:`_births` in numpy (the reference for :func:`_pending_births`)."""
         order = np.argsort(keys, kind="stable")
         keys, z = keys[order], z[order]
         if self.tracker.uses_truth:  # no initialisation needed: start at once
@@ -599,6 +639,113 @@ class TrackTable:
                 self._pend_key = np.insert(self._pend_key, pos, nk)
                 self._pend_z = np.insert(self._pend_z, pos, z[rest][add], axis=0)
                 self._pend_t = np.insert(self._pend_t, pos, time)
+
+
+#: :func:`_pending_births` starts a track without the tracker's checks of its initial
+#: covariance (:meth:`parts.Tracker.birth_checked`) only when the covariance's smallest
+#: eigenvalue is certainly above this fraction of its largest: per axis
+#: ``[[s², s²/Δt], [s²/Δt, 2s²/Δt² + q]]`` is positive definite for every Δt > 0
+#: (determinant ``s⁴/Δt² + s²q``, smallest eigenvalue at least determinant / trace), and
+#: far above the error of a numerical eigenvalue check (~1e-15 of the largest) it cannot
+#: be judged otherwise. Other starts take the numpy path and its checks.
+_CHECKED_MIN_RATIO = 1e-9
+
+
+@njit(cache=True)
+def _pending_births(
+    time, max_age, keys, z, pend_key, pend_z, pend_t, s2, omega_var, extra_var,
+    start, x0, P0, new_key, new_z, new_t,
+):  # fmt: skip  # pragma: no cover - compiled
+    """:meth:`TrackTable._births_reference` as one merge of the sorted detection ``keys``
+    (k,) (positions ``z`` (k, 2) m) with the pending detections ``pend_key`` (p,) sorted,
+    ``pend_z`` (p, 2) m, ``pend_t`` (p,) s.
+
+    A pending detection older than ``max_age`` s is forgotten; a key that has a pending
+    detection becomes a track start (``start``, ``x0`` (k, 5), ``P0`` (k, 5, 5) filled from
+    0: two-point initialisation with R = s2·I m², Ω = 0, Ω variance ``omega_var``,
+    velocity allowance ``extra_var`` (m/s)², the same arithmetic as
+    :func:`~airspace_sim.tracking.initialisation.two_point_initialisation`); the other keys
+    join the pending ones in ``new_key``, ``new_z``, ``new_t`` (sorted). Returns
+    ``(track starts, pending detections)``, or ``(-1, -1)`` with nothing written where
+    the reference path must decide: repeated keys, a pending detection not older than
+    ``time`` (it would be refreshed), an initial covariance not certainly positive definite
+    (:data:`_CHECKED_MIN_RATIO`) or a start that is not finite.
+    """
+    k, p = keys.size, pend_key.size
+    for q in range(1, k):
+        if keys[q] <= keys[q - 1]:
+            return -1, -1
+    # first pass: decide, without writing, whether this path applies
+    i = 0
+    for q in range(k):
+        while i < p and (pend_key[i] < keys[q] or not (time - pend_t[i]) <= max_age):
+            i += 1
+        if i < p and pend_key[i] == keys[q]:
+            d = time - pend_t[i]
+            if not d > 0.0:
+                return -1, -1
+            # the per-axis block's trace and determinant (the latter as a sum of positive
+            # terms), and the turn-rate variance: eigenvalues certainly well apart from 0
+            trace = s2 + (2.0 * s2 / (d * d) + extra_var)
+            det = s2 * s2 / (d * d) + s2 * extra_var
+            big = max(trace, omega_var)
+            if not (big < 1e300 and det / trace >= _CHECKED_MIN_RATIO * big):
+                return -1, -1
+            if not (omega_var >= _CHECKED_MIN_RATIO * big and extra_var >= 0.0):
+                return -1, -1
+            i += 1
+    n_start = 0
+    n_new = 0
+    i = 0
+    for q in range(k + 1):
+        # pending detections before this key stay, if fresh
+        while i < p and (q == k or pend_key[i] < keys[q]):
+            if (time - pend_t[i]) <= max_age:
+                new_key[n_new] = pend_key[i]
+                new_z[n_new, 0] = pend_z[i, 0]
+                new_z[n_new, 1] = pend_z[i, 1]
+                new_t[n_new] = pend_t[i]
+                n_new += 1
+            i += 1
+        if q == k:
+            break
+        if i < p and pend_key[i] == keys[q] and (time - pend_t[i]) <= max_age:
+            d = time - pend_t[i]
+            b = n_start
+            start[b] = keys[q]
+            x0[b, 0] = z[q, 0]
+            x0[b, 2] = z[q, 1]
+            x0[b, 1] = (z[q, 0] - pend_z[i, 0]) / d
+            x0[b, 3] = (z[q, 1] - pend_z[i, 1]) / d
+            x0[b, 4] = 0.0
+            P0[b] = 0.0
+            rd = s2 / d
+            vv = 2.0 * s2 / (d * d) + extra_var
+            for a in range(2):
+                pa, va = 2 * a, 2 * a + 1  # x, vx; y, vy
+                P0[b, pa, pa] = s2
+                P0[b, pa, va] = rd
+                P0[b, va, pa] = rd
+                P0[b, va, va] = vv
+            P0[b, 4, 4] = omega_var
+            n_start += 1
+            i += 1
+        else:  # a stale pending detection of this key is passed over by the loop above
+            if i < p and pend_key[i] == keys[q]:
+                i += 1
+            new_key[n_new] = keys[q]
+            new_z[n_new, 0] = z[q, 0]
+            new_z[n_new, 1] = z[q, 1]
+            new_t[n_new] = time
+            n_new += 1
+    for b in range(n_start):
+        for c in range(5):
+            if not np.isfinite(x0[b, c]):
+                return -1, -1
+            for e in range(5):
+                if not np.isfinite(P0[b, c, e]):
+                    return -1, -1
+    return n_start, n_new
 
 
 def _sorted_lookup(sorted_keys: np.ndarray, query: np.ndarray) -> np.ndarray:
