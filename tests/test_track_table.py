@@ -388,3 +388,47 @@ def test_birth_checked_is_birth_without_the_checks():
         b.drop(np.arange(0, b.capacity, 7)[b.alive[::7]])
         for name in ("_xs", "_Ps", "_mus", "_x", "_P", "_mu", "_nis", "_ll", "_gated"):
             assert getattr(a.imm, name).tobytes() == getattr(b.imm, name).tobytes(), name
+
+
+@pytest.mark.parametrize("order", ["world", "shuffled"])
+def test_lookup_by_the_previous_detections_matches_the_index(order):
+    """The slots found by merging with the previous update's detections
+    (:func:`trackers._lookup_by_previous`) against the index alone: detections in the
+    world's order (pairs ``owner < intruder``, then the others, each by pair) or shuffled,
+    with missed detections, gated ones, drops, dead aircraft and a repeated pair; every
+    table array bit for bit after every update."""
+    n = 10
+    rng = np.random.default_rng(11)
+    fast = TrackTable.build(n, "imm", PRESET, SIGMA, 2, 1.0)
+    ref = TrackTable.build(n, "imm", PRESET, SIGMA, 2, 1.0)
+    i, j = np.triu_indices(n, 1)
+    pairs = np.concatenate([np.stack([i, j], 1), np.stack([j, i], 1)])  # the world's order
+    pos = rng.uniform(-2e4, 2e4, (n, 2))
+    vel = rng.uniform(-250.0, 250.0, (n, 2))
+    alive = np.ones(n, dtype=bool)
+    used = 0
+    for scan in range(80):
+        time = float(scan)
+        if scan == 50:
+            alive[4] = False
+        pick = pairs[rng.random(len(pairs)) < 0.85]
+        if order == "shuffled":
+            rng.shuffle(pick)
+        if scan == 33:
+            pick = np.concatenate([pick[:5], pick[4:]])  # a pair twice
+        z = pos[pick[:, 1]] + vel[pick[:, 1]] * time + rng.normal(0.0, SIGMA, (len(pick), 2))
+        z[rng.random(len(pick)) < 0.05] += 5e3  # gated: a miss
+        used += fast._prev_rank.size > 0
+        ref._prev_rank = ref._prev_slot = np.zeros(0, np.int64)
+        for t in (fast, ref):
+            t.update(time, True, pick[:, 0], pick[:, 1], z, alive)
+        vf, vr = fast.view(), ref.view()
+        for name in ("slots", "owner", "intruder", "misses", "age", "x", "mu", "P"):
+            assert getattr(vf, name).tobytes() == getattr(vr, name).tobytes(), name
+        keys = pairs @ [n, 1]
+        assert np.array_equal(fast._index.get(keys), ref._index.get(keys))
+        if fast._prev_rank.size:  # the kept slots are the index's
+            s = fast._prev_slot
+            want = ref._index.get(pick[:, 0] * n + pick[:, 1])
+            assert np.array_equal(s, want)
+    assert (used > 60) == (order == "world") and len(fast) > 30

@@ -122,6 +122,55 @@ def _advance(
     return k
 
 
+@njit(cache=True)
+def _lookup_by_previous(owner, intruder, n, prev_rank, prev_slot, rank, slot):  # pragma: no cover
+    """The tracks of this scan's detections (D,) ``owner``, ``intruder`` from the previous
+    update's detections, by one merge: ``rank`` (D,) ← each pair's rank
+    ``[owner > intruder]·n² + min·n + max`` (the world's detection order: the pairs
+    ``owner < intruder`` by pair, then the others by pair), ``slot`` (D,) ← the slot its
+    track had at the end of the previous update (−1: none) where the pair was among that
+    update's detections ``prev_rank`` (P,) (increasing) with ``prev_slot`` (P,), else −2
+    (unknown: the caller asks the index). Sequential reads only, where the index's hash
+    table (2 MB at 1000 aircraft) is read at random and, after the rest of a step, from
+    memory. Returns ``(unknown, ordered)``: the number of −2 entries and whether the ranks
+    increase; from the first that does not, every slot is unknown."""
+    nn = n * n
+    c, p = 0, prev_rank.size
+    unknown = 0
+    ordered = True
+    last = -1
+    for d in range(owner.size):
+        o, i = owner[d], intruder[d]
+        r = (nn if o > i else 0) + min(o, i) * n + max(o, i)
+        rank[d] = r
+        if r <= last:
+            ordered = False
+        last = r
+        if ordered:
+            while c < p and prev_rank[c] < r:
+                c += 1
+            if c < p and prev_rank[c] == r:
+                slot[d] = prev_slot[c]
+                c += 1
+                continue
+        slot[d] = -2
+        unknown += 1
+    return unknown, ordered
+
+
+@njit(cache=True)
+def _without_dropped(slot_of_det, drop, mark, out):  # pragma: no cover - compiled
+    """``out`` (D,) ← ``slot_of_det`` (D,) with −1 where that slot is among ``drop`` (k,)
+    (``mark`` (capacity,) bool scratch, all False before and after)."""
+    for k in range(drop.size):
+        mark[drop[k]] = True
+    for d in range(slot_of_det.size):
+        s = slot_of_det[d]
+        out[d] = -1 if s < 0 or mark[s] else s
+    for k in range(drop.size):
+        mark[drop[k]] = False
+
+
 def mode_names(preset: Preset) -> tuple[str, ...]:
     """Names of the preset's modes: straight, left, right for the 3-mode presets of known
     rates 0, +ω, −ω (the traffic's modes); else :meth:`Preset.mode_names`."""
@@ -385,6 +434,11 @@ class TrackTable:
     _no_gate = np.zeros(0, dtype=np.bool_)
     # the slots :func:`_advance` drops, resized by :meth:`update` (class default: as above)
     _drop_buf = np.zeros(0, dtype=np.int64)
+    # the last update's detections (:func:`_lookup_by_previous`): pair ranks, increasing,
+    # and their slots at its end (derived from the index, not pickled); a mark per slot
+    _prev_rank = np.zeros(0, dtype=np.int64)
+    _prev_slot = np.zeros(0, dtype=np.int64)
+    _mark = np.zeros(0, dtype=np.bool_)
 
     def __init__(
         self,
@@ -480,7 +534,8 @@ class TrackTable:
         state = self.__dict__.copy()
         state.pop("_live", None)
         state.pop("_tracks_of_view", None)  # snapshot.live_tracks' of the kept views
-        state.pop("_drop_buf", None)  # scratch
+        for name in ("_drop_buf", "_mark", "_prev_rank", "_prev_slot"):  # scratch, derived
+            state.pop(name, None)
         state["_view"] = None
         return state
 
@@ -500,9 +555,23 @@ class TrackTable:
         if t.uses_truth and truth_states is None:
             raise UserError("TrackTable.update: this tracker needs truth_states")
         z = np.asarray(z, dtype=float).reshape(-1, 2)
-        det_key = np.asarray(det_owner, np.int64) * self.n + np.asarray(det_intruder, np.int64)
-        slot_of_det = self._index.get(det_key)  # −1: no track
+        det_owner = np.ascontiguousarray(det_owner, dtype=np.int64)
+        det_intruder = np.ascontiguousarray(det_intruder, dtype=np.int64)
+        det_key = det_owner * self.n + det_intruder
+        # −1: no track; the previous update's detections first, then the index
+        rank = np.empty(det_key.size, np.int64)
+        slot_of_det = np.empty(det_key.size, np.int64)
+        prev_rank, prev_slot = self._prev_rank, self._prev_slot
+        # (kept only by an update that completes)
+        self._prev_rank = self._prev_slot = np.zeros(0, dtype=np.int64)
+        unknown, ordered = _lookup_by_previous(
+            det_owner, det_intruder, self.n, prev_rank, prev_slot, rank, slot_of_det
+        )
+        if unknown:
+            ask = np.flatnonzero(slot_of_det == -2)
+            slot_of_det[ask] = self._index.get(det_key[ask])
         untracked = slot_of_det.size
+        after = slot_of_det  # the detections' slots after this update (−1: none)
         # 1. step every live track (NaN row: no measurement)
         if len(self):
             cap = t.capacity
@@ -526,11 +595,22 @@ class TrackTable:
                 np.asarray(alive, dtype=np.bool_), self._drop_buf,
             )  # fmt: skip
             if n_drop:
-                self._drop(self._drop_buf[:n_drop].copy())
+                drop = self._drop_buf[:n_drop].copy()
+                if self._mark.size != cap:
+                    self._mark = np.zeros(cap, dtype=np.bool_)
+                after = np.empty_like(slot_of_det)
+                _without_dropped(slot_of_det, drop, self._mark, after)
+                self._drop(drop)
         # 3. births
         if untracked:
-            new = slot_of_det < 0
+            new = np.flatnonzero(slot_of_det < 0)
             self._births(time, det_key[new], z[new], truth_states)
+            if ordered:
+                if after is slot_of_det:
+                    after = slot_of_det.copy()
+                after[new] = self._index.get(det_key[new])
+        if ordered:  # (else the next update asks the index for every detection)
+            self._prev_rank, self._prev_slot = rank, after
 
     def _drop(self, slots: np.ndarray) -> None:
         self.tracker.drop(slots)
