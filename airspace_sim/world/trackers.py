@@ -76,20 +76,21 @@ def _ro(a: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _measurements_by_slot(Z, slot_of_det, z):  # pragma: no cover - compiled
+def _measurements_by_slot(Z, slot_of_det, z, untracked):  # pragma: no cover - compiled
     """Z (capacity, 2) ← NaN, then row ``slot_of_det[d]`` ← z[d] where that is ≥ 0 (one pass;
-    numpy's row scatter is several times slower). Returns the number of detections without
-    a track (``slot_of_det`` < 0)."""
+    numpy's row scatter is several times slower). Writes the detections without a track
+    (``slot_of_det`` < 0) into ``untracked`` (D,), in order, and returns their number."""
     Z[:] = np.nan
-    untracked = 0
+    k = 0
     for d in range(slot_of_det.size):
         s = slot_of_det[d]
         if s >= 0:
             Z[s, 0] = z[d, 0]
             Z[s, 1] = z[d, 1]
         else:
-            untracked += 1
-    return untracked
+            untracked[k] = d
+            k += 1
+    return k
 
 
 @njit(cache=True)
@@ -123,24 +124,28 @@ def _advance(
 
 
 @njit(cache=True)
-def _lookup_by_previous(owner, intruder, n, prev_rank, prev_slot, rank, slot):  # pragma: no cover
+def _lookup_by_previous(
+    owner, intruder, n, prev_rank, prev_slot, key, rank, slot, unknown
+):  # pragma: no cover - compiled
     """The tracks of this scan's detections (D,) ``owner``, ``intruder`` from the previous
-    update's detections, by one merge: ``rank`` (D,) ← each pair's rank
-    ``[owner > intruder]·n² + min·n + max`` (the world's detection order: the pairs
-    ``owner < intruder`` by pair, then the others by pair), ``slot`` (D,) ← the slot its
-    track had at the end of the previous update (−1: none) where the pair was among that
-    update's detections ``prev_rank`` (P,) (increasing) with ``prev_slot`` (P,), else −2
-    (unknown: the caller asks the index). Sequential reads only, where the index's hash
-    table (2 MB at 1000 aircraft) is read at random and, after the rest of a step, from
-    memory. Returns ``(unknown, ordered)``: the number of −2 entries and whether the ranks
-    increase; from the first that does not, every slot is unknown."""
+    update's detections, by one merge: ``key`` (D,) ← ``owner·n + intruder``, ``rank``
+    (D,) ← each pair's rank ``[owner > intruder]·n² + min·n + max`` (the world's detection
+    order: the pairs ``owner < intruder`` by pair, then the others by pair), ``slot`` (D,)
+    ← the slot its track had at the end of the previous update (−1: none) where the pair
+    was among that update's detections ``prev_rank`` (P,) (increasing) with ``prev_slot``
+    (P,); the others' indices go to ``unknown`` (D,) for the caller to ask the index.
+    Sequential reads only, where the index's hash table (2 MB at 1000 aircraft) is read
+    at random and, after the rest of a step, from memory. Returns ``(unknown, ordered)``:
+    the number of those and whether the ranks increase; from the first that does not,
+    every detection is unknown."""
     nn = n * n
     c, p = 0, prev_rank.size
-    unknown = 0
+    u = 0
     ordered = True
     last = -1
     for d in range(owner.size):
         o, i = owner[d], intruder[d]
+        key[d] = o * n + i
         r = (nn if o > i else 0) + min(o, i) * n + max(o, i)
         rank[d] = r
         if r <= last:
@@ -153,9 +158,10 @@ def _lookup_by_previous(owner, intruder, n, prev_rank, prev_slot, rank, slot):  
                 slot[d] = prev_slot[c]
                 c += 1
                 continue
-        slot[d] = -2
-        unknown += 1
-    return unknown, ordered
+        slot[d] = -1
+        unknown[u] = d
+        u += 1
+    return u, ordered
 
 
 @njit(cache=True)
@@ -557,27 +563,29 @@ class TrackTable:
         z = np.asarray(z, dtype=float).reshape(-1, 2)
         det_owner = np.ascontiguousarray(det_owner, dtype=np.int64)
         det_intruder = np.ascontiguousarray(det_intruder, dtype=np.int64)
-        det_key = det_owner * self.n + det_intruder
+        D = det_owner.size
+        if det_intruder.size != D or z.shape[0] != D:
+            raise UserError(f"TrackTable.update: {D} owners, {det_intruder.size} intruders, "
+                            f"{z.shape[0]} measurements")  # fmt: skip
         # −1: no track; the previous update's detections first, then the index
-        rank = np.empty(det_key.size, np.int64)
-        slot_of_det = np.empty(det_key.size, np.int64)
+        det_key, rank, slot_of_det, new = (np.empty(D, np.int64) for _ in range(4))
         prev_rank, prev_slot = self._prev_rank, self._prev_slot
         # (kept only by an update that completes)
         self._prev_rank = self._prev_slot = np.zeros(0, dtype=np.int64)
-        unknown, ordered = _lookup_by_previous(
-            det_owner, det_intruder, self.n, prev_rank, prev_slot, rank, slot_of_det
-        )
-        if unknown:
-            ask = np.flatnonzero(slot_of_det == -2)
+        n_ask, ordered = _lookup_by_previous(
+            det_owner, det_intruder, self.n, prev_rank, prev_slot, det_key, rank, slot_of_det, new
+        )  # fmt: skip
+        if n_ask:
+            ask = new[:n_ask]
             slot_of_det[ask] = self._index.get(det_key[ask])
-        untracked = slot_of_det.size
+        untracked = -1  # (not counted yet)
         after = slot_of_det  # the detections' slots after this update (−1: none)
         # 1. step every live track (NaN row: no measurement)
         if len(self):
             cap = t.capacity
             if self._z.shape[0] != cap:
                 self._z = np.empty((cap, 2))
-            untracked = _measurements_by_slot(self._z, slot_of_det, z)
+            untracked = _measurements_by_slot(self._z, slot_of_det, z, new)
             truth = np.asarray(truth_states)[self._intruder] if t.uses_truth else None
             t.step(self._z, truth)
             # 2. age, misses (a gated measurement is a miss), drop
@@ -602,8 +610,11 @@ class TrackTable:
                 _without_dropped(slot_of_det, drop, self._mark, after)
                 self._drop(drop)
         # 3. births
+        if untracked < 0:  # no track stepped: every detection is new
+            untracked = D
+            new = np.arange(D)
         if untracked:
-            new = np.flatnonzero(slot_of_det < 0)
+            new = new[:untracked]
             self._births(time, det_key[new], z[new], truth_states)
             if ordered:
                 if after is slot_of_det:
