@@ -76,17 +76,20 @@ def _ro(a: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _measurements_by_slot(Z, slot_of_det, z, untracked):  # pragma: no cover - compiled
-    """Z (capacity, 2) ← NaN, then row ``slot_of_det[d]`` ← z[d] where that is ≥ 0 (one pass;
-    numpy's row scatter is several times slower). Writes the detections without a track
+def _measurements_by_slot(Z, detected, slot_of_det, z, untracked):  # pragma: no cover
+    """Z (capacity, 2) ← NaN and ``detected`` (capacity,) ← False, then row
+    ``slot_of_det[d]`` ← z[d] and ``detected`` ← True where that is ≥ 0 (one pass; numpy's
+    row scatter is several times slower). Writes the detections without a track
     (``slot_of_det`` < 0) into ``untracked`` (D,), in order, and returns their number."""
     Z[:] = np.nan
+    detected[:] = False
     k = 0
     for d in range(slot_of_det.size):
         s = slot_of_det[d]
         if s >= 0:
             Z[s, 0] = z[d, 0]
             Z[s, 1] = z[d, 1]
+            detected[s] = True
         else:
             untracked[k] = d
             k += 1
@@ -95,26 +98,19 @@ def _measurements_by_slot(Z, slot_of_det, z, untracked):  # pragma: no cover - c
 
 @njit(cache=True)
 def _advance(
-    live, owner, intruder, misses, age, slot_of_det, gated, scanned, drop_after, aircraft, out
+    live, owner, intruder, misses, age, detected, gated, scanned, drop_after, aircraft, out
 ):  # pragma: no cover - compiled
-    """One step of the per-slot bookkeeping (capacity,) arrays, in place: ``age`` + 1;
-    on a scan ``misses`` + 1, reset to 0 for the slots detected (``slot_of_det`` ≥ 0)
-    whose measurement the tracker used (not ``gated``, (capacity,) bool).
-    Writes the live slots to drop (too many misses, or owner or intruder gone) into
-    ``out`` (capacity,) and returns their number (an int, not an array: every array a
-    numba function returns costs a boxing and a ``_numba_unpickle`` call of its type)."""
-    cap = live.size
-    for s in range(cap):
-        age[s] += 1
-    if scanned:
-        for s in range(cap):
-            misses[s] += 1
-        for d in range(slot_of_det.size):
-            s = slot_of_det[d]
-            if s >= 0 and not gated[s]:
-                misses[s] = 0
+    """One step of the per-slot bookkeeping (capacity,) arrays, in place, in one pass:
+    ``age`` + 1; on a scan ``misses`` + 1, or 0 for the slots ``detected`` (capacity,)
+    bool whose measurement the tracker used (not ``gated``, (capacity,) bool). Writes the
+    live slots to drop (too many misses, or owner or intruder gone) into ``out``
+    (capacity,) and returns their number (an int, not an array: every array a numba
+    function returns costs a boxing and a ``_numba_unpickle`` call of its type)."""
     k = 0
-    for s in range(cap):
+    for s in range(live.size):
+        age[s] += 1
+        if scanned:
+            misses[s] = 0 if detected[s] and not gated[s] else misses[s] + 1
         if live[s] and (
             misses[s] >= drop_after or not aircraft[owner[s]] or not aircraft[intruder[s]]
         ):
@@ -445,6 +441,8 @@ class TrackTable:
     _prev_rank = np.zeros(0, dtype=np.int64)
     _prev_slot = np.zeros(0, dtype=np.int64)
     _mark = np.zeros(0, dtype=np.bool_)
+    # the slots detected this update (:func:`_measurements_by_slot`), sized with ``_z``
+    _detected = np.zeros(0, dtype=np.bool_)
 
     def __init__(
         self,
@@ -540,7 +538,7 @@ class TrackTable:
         state = self.__dict__.copy()
         state.pop("_live", None)
         state.pop("_tracks_of_view", None)  # snapshot.live_tracks' of the kept views
-        for name in ("_drop_buf", "_mark", "_prev_rank", "_prev_slot"):  # scratch, derived
+        for name in ("_drop_buf", "_mark", "_prev_rank", "_prev_slot", "_detected"):  # scratch
             state.pop(name, None)
         state["_view"] = None
         return state
@@ -585,7 +583,9 @@ class TrackTable:
             cap = t.capacity
             if self._z.shape[0] != cap:
                 self._z = np.empty((cap, 2))
-            untracked = _measurements_by_slot(self._z, slot_of_det, z, new)
+            if self._detected.size != cap:
+                self._detected = np.empty(cap, dtype=np.bool_)
+            untracked = _measurements_by_slot(self._z, self._detected, slot_of_det, z, new)
             truth = np.asarray(truth_states)[self._intruder] if t.uses_truth else None
             t.step(self._z, truth)
             # 2. age, misses (a gated measurement is a miss), drop
@@ -599,7 +599,7 @@ class TrackTable:
                 self._drop_buf = np.empty(cap, dtype=np.int64)
             n_drop = _advance(
                 np.asarray(t.alive), self._owner, self._intruder, self._misses, self._age,
-                slot_of_det, gated, bool(scanned), self.drop_after,
+                self._detected, gated, bool(scanned), self.drop_after,
                 np.asarray(alive, dtype=np.bool_), self._drop_buf,
             )  # fmt: skip
             if n_drop:
