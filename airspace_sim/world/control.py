@@ -45,12 +45,16 @@ class Encounters:
         )
 
     def subset(self, mask: np.ndarray) -> Encounters:
+        """The ownships with ``mask`` (n_own,) bool True (row gathers by ``np.take``,
+        several times faster than boolean indexing of these (n_own, K, ·) arrays)."""
+        rows = np.flatnonzero(mask)
+        take = lambda a: np.take(a, rows, axis=0)
         return Encounters(
-            self.owners[mask],
-            self.rows[mask],
-            self.rel_position[mask],
-            self.rel_velocity[mask],
-            self.valid[mask],
+            take(self.owners),
+            take(self.rows),
+            take(self.rel_position),
+            take(self.rel_velocity),
+            take(self.valid),
         )
 
     def compact(self, keep: np.ndarray) -> Encounters:
