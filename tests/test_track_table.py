@@ -395,8 +395,8 @@ def test_lookup_by_the_previous_detections_matches_the_index(order):
     """The slots found by merging with the previous update's detections
     (:func:`trackers._lookup_by_previous`) against the index alone: detections in the
     world's order (pairs ``owner < intruder``, then the others, each by pair) or shuffled,
-    with missed detections, gated ones, drops, dead aircraft and a repeated pair; every
-    table array bit for bit after every update."""
+    with missed detections, gated ones, drops, dead aircraft, updates between scans and a
+    repeated pair; every table array bit for bit after every update."""
     n = 10
     rng = np.random.default_rng(11)
     fast = TrackTable.build(n, "imm", PRESET, SIGMA, 2, 1.0)
@@ -409,9 +409,12 @@ def test_lookup_by_the_previous_detections_matches_the_index(order):
     used = 0
     for scan in range(80):
         time = float(scan)
-        if scan == 50:
+        if scan == 51:  # (an update between scans: its drops)
             alive[4] = False
         pick = pairs[rng.random(len(pairs)) < 0.85]
+        scanned = scan % 4 != 3
+        if not scanned:
+            pick = pick[:0]
         if order == "shuffled":
             rng.shuffle(pick)
         if scan == 33:
@@ -421,14 +424,15 @@ def test_lookup_by_the_previous_detections_matches_the_index(order):
         used += fast._prev_rank.size > 0
         ref._prev_rank = ref._prev_slot = np.zeros(0, np.int64)
         for t in (fast, ref):
-            t.update(time, True, pick[:, 0], pick[:, 1], z, alive)
+            t.update(time, scanned, pick[:, 0], pick[:, 1], z, alive)
         vf, vr = fast.view(), ref.view()
         for name in ("slots", "owner", "intruder", "misses", "age", "x", "mu", "P"):
             assert getattr(vf, name).tobytes() == getattr(vr, name).tobytes(), name
         keys = pairs @ [n, 1]
         assert np.array_equal(fast._index.get(keys), ref._index.get(keys))
-        if fast._prev_rank.size:  # the kept slots are the index's
-            s = fast._prev_slot
-            want = ref._index.get(pick[:, 0] * n + pick[:, 1])
-            assert np.array_equal(s, want)
-    assert (used > 60) == (order == "world") and len(fast) > 30
+        if scanned:
+            last = pick
+        if fast._prev_rank.size:  # the kept slots are the index's, for the last scan
+            want = ref._index.get(last[:, 0] * n + last[:, 1])
+            assert np.array_equal(fast._prev_slot, want)
+    assert (used > 55) == (order == "world") and len(fast) > 30

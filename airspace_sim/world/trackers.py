@@ -577,6 +577,7 @@ class TrackTable:
             ask = new[:n_ask]
             slot_of_det[ask] = self._index.get(det_key[ask])
         untracked = -1  # (not counted yet)
+        drop = slot_of_det[:0]  # the slots dropped
         after = slot_of_det  # the detections' slots after this update (−1: none)
         # 1. step every live track (NaN row: no measurement)
         if len(self):
@@ -620,6 +621,11 @@ class TrackTable:
                 if after is slot_of_det:
                     after = slot_of_det.copy()
                 after[new] = self._index.get(det_key[new])
+        if D == 0 and prev_rank.size:  # between scans: the last scan's, less the drops
+            rank, after = prev_rank, prev_slot
+            if drop.size:
+                after = np.empty_like(prev_slot)
+                _without_dropped(prev_slot, drop, self._mark, after)
         if ordered:  # (else the next update asks the index for every detection)
             self._prev_rank, self._prev_slot = rank, after
 
