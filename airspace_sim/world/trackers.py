@@ -566,13 +566,16 @@ class TrackTable:
             raise UserError(f"TrackTable.update: {D} owners, {det_intruder.size} intruders, "
                             f"{z.shape[0]} measurements")  # fmt: skip
         # −1: no track; the previous update's detections first, then the index
-        det_key, rank, slot_of_det, new = (np.empty(D, np.int64) for _ in range(4))
+        det_key, rank, slot_of_det, new = np.empty((4, D), np.int64)
         prev_rank, prev_slot = self._prev_rank, self._prev_slot
         # (kept only by an update that completes)
         self._prev_rank = self._prev_slot = np.zeros(0, dtype=np.int64)
-        n_ask, ordered = _lookup_by_previous(
-            det_owner, det_intruder, self.n, prev_rank, prev_slot, det_key, rank, slot_of_det, new
-        )  # fmt: skip
+        n_ask, ordered = 0, True
+        if D:
+            n_ask, ordered = _lookup_by_previous(
+                det_owner, det_intruder, self.n, prev_rank, prev_slot, det_key, rank,
+                slot_of_det, new,
+            )  # fmt: skip
         if n_ask:
             ask = new[:n_ask]
             slot_of_det[ask] = self._index.get(det_key[ask])
