@@ -205,6 +205,13 @@ class Tracker(ABC):
         """Start k tracks: ``x0`` (k, n), ``P0`` (k, n, n); mode probabilities start at the
         model's own initial ones. Returns their slots (k,) int."""
 
+    def birth_checked(self, x0, P0) -> np.ndarray:
+        """:meth:`birth` of arrays the caller has already checked: ``x0`` (k, n) finite
+        float64, ``P0`` (k, n, n) finite, exactly symmetric and positive definite, both
+        C-contiguous (the track table's two-point initialisations). A tracker may skip its
+        own input checks here; the default is :meth:`birth`."""
+        return self.birth(x0, P0)
+
     @abstractmethod
     def drop(self, slots) -> None:
         """End the tracks in ``slots`` (k,) int (live slots)."""

@@ -10,6 +10,7 @@ raw state, which must never change while they are free.
 from __future__ import annotations
 
 import pickle
+import re
 import warnings
 
 import numpy as np
@@ -280,3 +281,24 @@ def test_keymap_against_a_dict_under_random_inserts_and_deletes():
         q = rng.integers(0, 5000, 200)
         assert km.get(q).tolist() == [ref.get(k, -1) for k in q.tolist()]
         assert len(km) == len(ref)
+
+
+def test_slots_release_refuses_bad_slots_and_frees_nothing():
+    """Slots.release: out of range, not live and repeated slots are refused in that order,
+    with the table unchanged; a good release pushes the slots on the free stack."""
+    sl = Slots(4)
+    sl.grow(8)
+    taken = sl.take(5)
+    before = (sl.alive.copy(), sl._free.copy(), sl._n_free)
+    for bad, msg in (
+        ([1, 9, -1], "slot 9 out of range 0..7"),
+        ([0, 6, 7], "slot 6 is not live"),
+        ([2, 3, 2], "repeated slots in [2, 3, 2]"),
+    ):
+        with pytest.raises(UserError, match=re.escape(msg)):
+            sl.release(np.array(bad))
+        assert sl._n_free == before[2] and np.array_equal(sl.alive, before[0])
+        assert np.array_equal(sl._free, before[1])
+    out = sl.release(np.array([taken[1], taken[3]], dtype=np.int32))
+    assert out.dtype == np.int64 and out.tolist() == [taken[1], taken[3]]
+    assert sl.n_live == 3 and sl.take(2).tolist() == [taken[3], taken[1]]

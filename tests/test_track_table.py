@@ -331,3 +331,108 @@ def test_kept_view_buffers_hold_numpys_gathers_through_births_drops_and_pickling
             assert w.tracks._view is None and "_live" not in w.tracks.__dict__
     assert len(counts) > 3 and len(caps) > 1
     assert ("_live" in w.tracks.__dict__) == kept
+
+
+@pytest.mark.parametrize("sigma", [50.0, 0.5, 1e7])
+def test_births_kernel_matches_the_numpy_reference(sigma):
+    """:func:`trackers._pending_births` (one merge of the sorted detections with the
+    pending ones, starts through ``birth_checked``) against ``_births_reference`` (numpy,
+    the tracker's checked ``birth``): random detections over many scans (missed scans,
+    stale pending detections, dead aircraft, a repeated key, an update at the same time
+    twice); the pending detections, the view and the tracker's arrays bit for bit."""
+    n = 12
+    rng = np.random.default_rng(7)
+    fast = TrackTable.build(n, "imm", PRESET, sigma, 2, 1.0)
+    ref = TrackTable.build(n, "imm", PRESET, sigma, 2, 1.0)
+    ref._births = ref._births_reference
+    pairs = np.array([(o, i) for o in range(n) for i in range(n) if o != i])
+    pos = rng.uniform(-2e4, 2e4, (n, 2))
+    vel = rng.uniform(-250.0, 250.0, (n, 2))
+    alive = np.ones(n, dtype=bool)
+    time = 0.0
+    for scan in range(60):
+        time += 1.0 if scan != 30 else 0.0  # scan 30 at the time of scan 29
+        if scan == 40:
+            alive[3] = False
+        pick = pairs[rng.random(len(pairs)) < 0.4]
+        if scan == 20:  # a pair detected twice in one scan
+            pick = np.concatenate([pick, pick[:1]])
+        rng.shuffle(pick)
+        z = pos[pick[:, 1]] + vel[pick[:, 1]] * time + rng.normal(0.0, 50.0, (len(pick), 2))
+        for t in (fast, ref):
+            t.update(time, True, pick[:, 0], pick[:, 1], z, alive)
+        for a, b in zip(
+            (fast._pend_key, fast._pend_z, fast._pend_t), (ref._pend_key, ref._pend_z, ref._pend_t)
+        ):
+            assert a.tobytes() == b.tobytes()
+        vf, vr = fast.view(), ref.view()
+        for name in ("slots", "owner", "intruder", "misses", "age", "x", "mu", "P"):
+            assert getattr(vf, name).tobytes() == getattr(vr, name).tobytes(), name
+        for name in ("x", "P", "mu", "alive"):
+            assert getattr(fast.tracker, name).tobytes() == getattr(ref.tracker, name).tobytes()
+        assert np.array_equal(fast._index.get(pairs @ [n, 1]), ref._index.get(pairs @ [n, 1]))
+    assert len(fast) > 20
+
+
+def test_birth_checked_is_birth_without_the_checks():
+    """ImmTracker.birth_checked gives the slots, lanes and arrays of birth."""
+    a, b = make_tracker("imm", PRESET, SIGMA), make_tracker("imm", PRESET, SIGMA)
+    rng = np.random.default_rng(3)
+    for k in (3, 40, 1, 100):
+        x0, P0 = two_point_initialisation(
+            rng.normal(0, 1e4, (k, 2)), rng.normal(0, 1e4, (k, 2)), rng.uniform(0.5, 3, k),
+            SIGMA**2 * np.eye(2), 0.0, OMEGA**2, MANOEUVRE_VELOCITY_VAR,
+        )  # fmt: skip
+        assert np.array_equal(a.birth(x0, P0), b.birth_checked(x0, P0))
+        a.drop(np.arange(0, a.capacity, 7)[a.alive[::7]])
+        b.drop(np.arange(0, b.capacity, 7)[b.alive[::7]])
+        for name in ("_xs", "_Ps", "_mus", "_x", "_P", "_mu", "_nis", "_ll", "_gated"):
+            assert getattr(a.imm, name).tobytes() == getattr(b.imm, name).tobytes(), name
+
+
+@pytest.mark.parametrize("order", ["world", "shuffled"])
+def test_lookup_by_the_previous_detections_matches_the_index(order):
+    """The slots found by merging with the previous update's detections
+    (:func:`trackers._lookup_by_previous`) against the index alone: detections in the
+    world's order (pairs ``owner < intruder``, then the others, each by pair) or shuffled,
+    with missed detections, gated ones, drops, dead aircraft, updates between scans and a
+    repeated pair; every table array bit for bit after every update."""
+    n = 10
+    rng = np.random.default_rng(11)
+    fast = TrackTable.build(n, "imm", PRESET, SIGMA, 2, 1.0)
+    ref = TrackTable.build(n, "imm", PRESET, SIGMA, 2, 1.0)
+    i, j = np.triu_indices(n, 1)
+    pairs = np.concatenate([np.stack([i, j], 1), np.stack([j, i], 1)])  # the world's order
+    pos = rng.uniform(-2e4, 2e4, (n, 2))
+    vel = rng.uniform(-250.0, 250.0, (n, 2))
+    alive = np.ones(n, dtype=bool)
+    used = 0
+    for scan in range(80):
+        time = float(scan)
+        if scan == 51:  # (an update between scans: its drops)
+            alive[4] = False
+        pick = pairs[rng.random(len(pairs)) < 0.85]
+        scanned = scan % 4 != 3
+        if not scanned:
+            pick = pick[:0]
+        if order == "shuffled":
+            rng.shuffle(pick)
+        if scan == 33:
+            pick = np.concatenate([pick[:5], pick[4:]])  # a pair twice
+        z = pos[pick[:, 1]] + vel[pick[:, 1]] * time + rng.normal(0.0, SIGMA, (len(pick), 2))
+        z[rng.random(len(pick)) < 0.05] += 5e3  # gated: a miss
+        used += fast._prev_rank.size > 0
+        ref._prev_rank = ref._prev_slot = np.zeros(0, np.int64)
+        for t in (fast, ref):
+            t.update(time, scanned, pick[:, 0], pick[:, 1], z, alive)
+        vf, vr = fast.view(), ref.view()
+        for name in ("slots", "owner", "intruder", "misses", "age", "x", "mu", "P"):
+            assert getattr(vf, name).tobytes() == getattr(vr, name).tobytes(), name
+        keys = pairs @ [n, 1]
+        assert np.array_equal(fast._index.get(keys), ref._index.get(keys))
+        if scanned:
+            last = pick
+        if fast._prev_rank.size:  # the kept slots are the index's, for the last scan
+            want = ref._index.get(last[:, 0] * n + last[:, 1])
+            assert np.array_equal(fast._prev_slot, want)
+    assert (used > 55) == (order == "world") and len(fast) > 30

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from airspace_sim.dynamics.markov import validate_transition_matrix
 from airspace_sim.errors import UserError
@@ -170,6 +171,10 @@ class SlotIMM:
         self._kernel, self._W, self.kernel = choose_kernel(self._F, self._H, self._ct, kernel)
         # the generated kernel stores only the upper triangle of each P_j (less to move)
         self._tri = self.kernel == "generated"
+        n = self.n
+        k, l = np.triu_indices(n) if self._tri else np.divmod(np.arange(n * n), n)
+        # stored covariance entry t is entry _P_index[t] of the row-major (n, n) matrix
+        self._P_index = np.ascontiguousarray(k * n + l, dtype=np.int64)
 
     def __getstate__(self) -> dict:
         # the kernel is a compiled function (the generated one from a cache-directory
@@ -257,21 +262,23 @@ class SlotIMM:
         """Start validated tracks (k, n), (k, n, n), (k, M) in the live lanes ``slots``."""
         k = x0.shape[0]
         M, n = self.M, self.n
-        c, w = self._lanes(slots)
-        self._xs[c, :, :, w] = x0[:, None, :]
-        if self._tri:
-            self._Ps[c, :, :, w] = P0[:, None, self._tri_k, self._tri_l]
-        else:
-            self._Ps[c, :, :, :, w] = P0[:, None]
-        self._mus[c, :, w] = mu0
-        # combined estimate as filterpy's constructor makes it (Σ μ_j x_j with equal x_j)
+        # combined estimate as filterpy's constructor makes it (Σ μ_j x_j with equal x_j;
+        # numpy's einsum, whose fused multiply-adds a plain loop would not reproduce)
         xm = np.broadcast_to(x0[:, None, :], (k, M, n))
         Pm = np.broadcast_to(P0[:, None], (k, M, n, n))
-        self._x[slots], self._P[slots] = _combine(xm, Pm, mu0)
-        self._mu[slots] = mu0
-        self._nis[slots] = np.nan
-        self._ll[slots] = np.nan
-        self._gated[slots] = False
+        x, P = _combine(xm, Pm, mu0)
+        _write_lanes(
+            np.asarray(slots, dtype=np.int64), self._W, x0, P0, mu0, x, P, self._P_index,
+            self._xs, self._Ps_flat(), self._mus, self._x, self._P, self._mu, self._nis,
+            self._ll, self._gated,
+        )  # fmt: skip
+
+    def _Ps_flat(self) -> np.ndarray:
+        """``Ps`` as (C, M, T, W), T the stored entries of a covariance (a view: setting
+        the shape raises rather than copy)."""
+        v = self._Ps.view()
+        v.shape = self._Ps.shape[:2] + (-1, self._W)
+        return v
 
     # --------------------------------------------------------------- properties
     @property
@@ -330,6 +337,13 @@ class SlotIMM:
         x0, P0, mu0 = self._initial(x0, P0, mu0, "birth ")
         return self._birth_valid(x0, P0, mu0)
 
+    def birth_checked(self, x0, P0, mu0) -> np.ndarray:
+        """:meth:`birth` without the input checks, for arrays the caller guarantees:
+        x0 (k, n) finite, P0 (k, n, n) finite, exactly symmetric, positive definite, mu0
+        (k, M) as :meth:`birth` would make it (non-negative rows, each divided by its sum),
+        all C-contiguous float64. The same slots and lanes as :meth:`birth` of them."""
+        return self._birth_valid(x0, P0, mu0)
+
     def _birth_valid(self, x0, P0, mu0) -> np.ndarray:
         k = x0.shape[0]
         need = self._slots.capacity_for(k)
@@ -345,16 +359,10 @@ class SlotIMM:
         s = self._slots.release(slots, "IMM drop")
         if s.size == 0:
             return
-        c, w = self._lanes(s)
-        self._xs[c, :, :, w] = 0.0
-        if self._tri:
-            self._Ps[c, :, :, w] = self._free_P
-        else:
-            self._Ps[c, :, :, :, w] = self._free_P
-        self._mus[c, :, w] = 1.0 / self.M
-        for a in (self._x, self._P, self._mu, self._nis, self._ll):
-            a[s] = np.nan
-        self._gated[s] = False
+        _free_lanes(
+            s, self._W, self._free_P.reshape(-1), 1.0 / self.M, self._xs, self._Ps_flat(),
+            self._mus, self._x, self._P, self._mu, self._nis, self._ll, self._gated,
+        )  # fmt: skip
 
     @classmethod
     def from_preset(cls, preset, **kwargs) -> SlotIMM:
@@ -456,3 +464,63 @@ class SlotIMM:
             f"SlotIMM(live={self.n_live}, capacity={self.capacity}, M={self.M}, n={self.n}, "
             f"m={self.m}, kernel={self.kernel!r})"
         )
+
+
+@njit(cache=True)
+def _write_lanes(
+    slots, W, x0, P0, mu0, x, P, P_index, xs, Ps, mus, x_out, P_out, mu_out, nis, ll, gated
+):  # pragma: no cover - compiled
+    """The births of :meth:`SlotIMM._write` in one pass: slot ``slots[b]`` (lane
+    ``slots[b] % W`` of chunk ``slots[b] // W``) gets every mode's state x0[b] (n,),
+    covariance P0[b] (n, n) (the stored entries ``P_index`` (T,) of the row-major matrix,
+    into ``Ps`` (C, M, T, W)) and mode probabilities mu0[b] (M,); the combined estimate
+    x[b], P[b]; NaN NIS and log-likelihoods, not gated."""
+    n = x0.shape[1]
+    M = mus.shape[1]
+    T = P_index.size
+    for b in range(slots.size):
+        s = slots[b]
+        c, w = s // W, s % W
+        for j in range(M):
+            for i in range(n):
+                xs[c, j, i, w] = x0[b, i]
+            for t in range(T):
+                e = P_index[t]
+                Ps[c, j, t, w] = P0[b, e // n, e % n]
+            mus[c, j, w] = mu0[b, j]
+            mu_out[s, j] = mu0[b, j]
+            ll[s, j] = np.nan
+        for i in range(n):
+            x_out[s, i] = x[b, i]
+            for k in range(n):
+                P_out[s, i, k] = P[b, i, k]
+        nis[s] = np.nan
+        gated[s] = False
+
+
+@njit(cache=True)
+def _free_lanes(
+    slots, W, free_P, free_mu, xs, Ps, mus, x_out, P_out, mu_out, nis, ll, gated
+):  # pragma: no cover - compiled
+    """The lanes of :meth:`SlotIMM.drop` reset in one pass: state 0, covariance entries
+    ``free_P`` (T,), mode probabilities ``free_mu`` in the kernel's arrays; NaN outputs,
+    not gated."""
+    M = mus.shape[1]
+    n = xs.shape[2]
+    for b in range(slots.size):
+        s = slots[b]
+        c, w = s // W, s % W
+        for j in range(M):
+            for i in range(n):
+                xs[c, j, i, w] = 0.0
+            for t in range(free_P.size):
+                Ps[c, j, t, w] = free_P[t]
+            mus[c, j, w] = free_mu
+            mu_out[s, j] = np.nan
+            ll[s, j] = np.nan
+        for i in range(n):
+            x_out[s, i] = np.nan
+            for k in range(n):
+                P_out[s, i, k] = np.nan
+        nis[s] = np.nan
+        gated[s] = False

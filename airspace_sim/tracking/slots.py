@@ -16,6 +16,7 @@ gets is a pure function of that sequence (same run, same slots).
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from airspace_sim.errors import UserError
 
@@ -83,20 +84,41 @@ class Slots:
             return np.zeros(0, dtype=np.int64)
         if not np.issubdtype(s.dtype, np.integer):
             raise UserError(f"{where}: slots must be integers, got dtype {s.dtype}")
-        s = s.reshape(-1).astype(np.int64)
-        bad = (s < 0) | (s >= self.capacity)
-        if bad.any():
-            raise UserError(f"{where}: slot {int(s[bad][0])} out of range 0..{self.capacity - 1}")
-        dead = ~self.alive[s]
-        if dead.any():
-            raise UserError(f"{where}: slot {int(s[dead][0])} is not live")
-        if np.unique(s).size != s.size:
+        s = np.ascontiguousarray(s.reshape(-1), dtype=np.int64)
+        error, at = _release(self.alive, self._free, self._n_free, s)
+        if error == 1:
+            raise UserError(f"{where}: slot {int(s[at])} out of range 0..{self.capacity - 1}")
+        if error == 2:
+            raise UserError(f"{where}: slot {int(s[at])} is not live")
+        if error == 3:
             raise UserError(f"{where}: repeated slots in {s.tolist()}")
-        self.alive[s] = False
-        self._free[self._n_free : self._n_free + s.size] = s
         self._n_free += s.size
         return s
 
     def live(self) -> np.ndarray:
         """The live slots in increasing order (L,) int64 (O(capacity))."""
         return np.flatnonzero(self.alive)
+
+
+@njit(cache=True)
+def _release(alive, free, n_free, s):  # pragma: no cover - compiled
+    """:meth:`Slots.release` of ``s`` (k,) int64: ``(0, 0)`` after clearing ``alive`` and
+    pushing ``s`` on the free stack ``free[n_free:]``, or with nothing changed ``(1, i)``
+    (``s[i]`` is the first out of range), ``(2, i)`` (the first not live) or ``(3, 0)``
+    (a slot repeated), checked in that order."""
+    cap = alive.size
+    for i in range(s.size):
+        if s[i] < 0 or s[i] >= cap:
+            return 1, i
+    for i in range(s.size):
+        if not alive[s[i]]:
+            return 2, i
+    for i in range(s.size):
+        if not alive[s[i]]:  # live before this pass: cleared by an earlier entry
+            for j in range(i):
+                alive[s[j]] = True
+            return 3, 0
+        alive[s[i]] = False
+    for i in range(s.size):
+        free[n_free + i] = s[i]
+    return 0, 0

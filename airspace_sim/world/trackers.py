@@ -76,50 +76,101 @@ def _ro(a: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _measurements_by_slot(Z, slot_of_det, z):  # pragma: no cover - compiled
-    """Z (capacity, 2) ← NaN, then row ``slot_of_det[d]`` ← z[d] where that is ≥ 0 (one pass;
-    numpy's row scatter is several times slower). Returns the number of detections without
-    a track (``slot_of_det`` < 0)."""
+def _measurements_by_slot(Z, detected, slot_of_det, z, untracked):  # pragma: no cover
+    """Z (capacity, 2) ← NaN and ``detected`` (capacity,) ← False, then row
+    ``slot_of_det[d]`` ← z[d] and ``detected`` ← True where that is ≥ 0 (one pass; numpy's
+    row scatter is several times slower). Writes the detections without a track
+    (``slot_of_det`` < 0) into ``untracked`` (D,), in order, and returns their number."""
     Z[:] = np.nan
-    untracked = 0
+    detected[:] = False
+    k = 0
     for d in range(slot_of_det.size):
         s = slot_of_det[d]
         if s >= 0:
             Z[s, 0] = z[d, 0]
             Z[s, 1] = z[d, 1]
+            detected[s] = True
         else:
-            untracked += 1
-    return untracked
+            untracked[k] = d
+            k += 1
+    return k
 
 
 @njit(cache=True)
 def _advance(
-    live, owner, intruder, misses, age, slot_of_det, gated, scanned, drop_after, aircraft, out
+    live, owner, intruder, misses, age, detected, gated, scanned, drop_after, aircraft, out
 ):  # pragma: no cover - compiled
-    """One step of the per-slot bookkeeping (capacity,) arrays, in place: ``age`` + 1;
-    on a scan ``misses`` + 1, reset to 0 for the slots detected (``slot_of_det`` ≥ 0)
-    whose measurement the tracker used (not ``gated``, (capacity,) bool).
-    Writes the live slots to drop (too many misses, or owner or intruder gone) into
-    ``out`` (capacity,) and returns their number (an int, not an array: every array a
-    numba function returns costs a boxing and a ``_numba_unpickle`` call of its type)."""
-    cap = live.size
-    for s in range(cap):
-        age[s] += 1
-    if scanned:
-        for s in range(cap):
-            misses[s] += 1
-        for d in range(slot_of_det.size):
-            s = slot_of_det[d]
-            if s >= 0 and not gated[s]:
-                misses[s] = 0
+    """One step of the per-slot bookkeeping (capacity,) arrays, in place, in one pass:
+    ``age`` + 1; on a scan ``misses`` + 1, or 0 for the slots ``detected`` (capacity,)
+    bool whose measurement the tracker used (not ``gated``, (capacity,) bool). Writes the
+    live slots to drop (too many misses, or owner or intruder gone) into ``out``
+    (capacity,) and returns their number (an int, not an array: every array a numba
+    function returns costs a boxing and a ``_numba_unpickle`` call of its type)."""
     k = 0
-    for s in range(cap):
+    for s in range(live.size):
+        age[s] += 1
+        if scanned:
+            misses[s] = 0 if detected[s] and not gated[s] else misses[s] + 1
         if live[s] and (
             misses[s] >= drop_after or not aircraft[owner[s]] or not aircraft[intruder[s]]
         ):
             out[k] = s
             k += 1
     return k
+
+
+@njit(cache=True)
+def _lookup_by_previous(
+    owner, intruder, n, prev_rank, prev_slot, key, rank, slot, unknown
+):  # pragma: no cover - compiled
+    """The tracks of this scan's detections (D,) ``owner``, ``intruder`` from the previous
+    update's detections, by one merge: ``key`` (D,) ← ``owner·n + intruder``, ``rank``
+    (D,) ← each pair's rank ``[owner > intruder]·n² + min·n + max`` (the world's detection
+    order: the pairs ``owner < intruder`` by pair, then the others by pair), ``slot`` (D,)
+    ← the slot its track had at the end of the previous update (−1: none) where the pair
+    was among that update's detections ``prev_rank`` (P,) (increasing) with ``prev_slot``
+    (P,); the others' indices go to ``unknown`` (D,) for the caller to ask the index.
+    Sequential reads only, where the index's hash table (2 MB at 1000 aircraft) is read
+    at random and, after the rest of a step, from memory. Returns ``(unknown, ordered)``:
+    the number of those and whether the ranks increase; from the first that does not,
+    every detection is unknown."""
+    nn = n * n
+    c, p = 0, prev_rank.size
+    u = 0
+    ordered = True
+    last = -1
+    for d in range(owner.size):
+        o, i = owner[d], intruder[d]
+        key[d] = o * n + i
+        r = (nn if o > i else 0) + min(o, i) * n + max(o, i)
+        rank[d] = r
+        if r <= last:
+            ordered = False
+        last = r
+        if ordered:
+            while c < p and prev_rank[c] < r:
+                c += 1
+            if c < p and prev_rank[c] == r:
+                slot[d] = prev_slot[c]
+                c += 1
+                continue
+        slot[d] = -1
+        unknown[u] = d
+        u += 1
+    return u, ordered
+
+
+@njit(cache=True)
+def _without_dropped(slot_of_det, drop, mark, out):  # pragma: no cover - compiled
+    """``out`` (D,) ← ``slot_of_det`` (D,) with −1 where that slot is among ``drop`` (k,)
+    (``mark`` (capacity,) bool scratch, all False before and after)."""
+    for k in range(drop.size):
+        mark[drop[k]] = True
+    for d in range(slot_of_det.size):
+        s = slot_of_det[d]
+        out[d] = -1 if s < 0 or mark[s] else s
+    for k in range(drop.size):
+        mark[drop[k]] = False
 
 
 def mode_names(preset: Preset) -> tuple[str, ...]:
@@ -169,6 +220,15 @@ class ImmTracker(parts.Tracker):
 
     def birth(self, x0, P0) -> np.ndarray:
         return self.imm.birth(x0, P0, self._mu0)
+
+    def birth_checked(self, x0, P0) -> np.ndarray:
+        if not self.__dict__.get("_mu0_checked"):  # mu0's checks, once (they only raise)
+            self.imm._initial(np.zeros((1, self.imm.n)), np.eye(self.imm.n), self._mu0, "")
+            self._mu0_checked = True
+        # the rows of mu0 as SlotIMM._initial makes them (the same numpy operations)
+        mu0 = np.broadcast_to(np.array(self._mu0, dtype=float), (x0.shape[0], self.n_modes))
+        mu0 = mu0.copy()
+        return self.imm.birth_checked(x0, P0, np.ascontiguousarray(mu0 / mu0.sum(axis=1)[:, None]))
 
     def drop(self, slots) -> None:
         self.imm.drop(slots)
@@ -376,6 +436,13 @@ class TrackTable:
     _no_gate = np.zeros(0, dtype=np.bool_)
     # the slots :func:`_advance` drops, resized by :meth:`update` (class default: as above)
     _drop_buf = np.zeros(0, dtype=np.int64)
+    # the last update's detections (:func:`_lookup_by_previous`): pair ranks, increasing,
+    # and their slots at its end (derived from the index, not pickled); a mark per slot
+    _prev_rank = np.zeros(0, dtype=np.int64)
+    _prev_slot = np.zeros(0, dtype=np.int64)
+    _mark = np.zeros(0, dtype=np.bool_)
+    # the slots detected this update (:func:`_measurements_by_slot`), sized with ``_z``
+    _detected = np.zeros(0, dtype=np.bool_)
 
     def __init__(
         self,
@@ -471,7 +538,8 @@ class TrackTable:
         state = self.__dict__.copy()
         state.pop("_live", None)
         state.pop("_tracks_of_view", None)  # snapshot.live_tracks' of the kept views
-        state.pop("_drop_buf", None)  # scratch
+        for name in ("_drop_buf", "_mark", "_prev_rank", "_prev_slot", "_detected"):  # scratch
+            state.pop(name, None)
         state["_view"] = None
         return state
 
@@ -491,15 +559,37 @@ class TrackTable:
         if t.uses_truth and truth_states is None:
             raise UserError("TrackTable.update: this tracker needs truth_states")
         z = np.asarray(z, dtype=float).reshape(-1, 2)
-        det_key = np.asarray(det_owner, np.int64) * self.n + np.asarray(det_intruder, np.int64)
-        slot_of_det = self._index.get(det_key)  # −1: no track
-        untracked = slot_of_det.size
+        det_owner = np.ascontiguousarray(det_owner, dtype=np.int64)
+        det_intruder = np.ascontiguousarray(det_intruder, dtype=np.int64)
+        D = det_owner.size
+        if det_intruder.size != D or z.shape[0] != D:
+            raise UserError(f"TrackTable.update: {D} owners, {det_intruder.size} intruders, "
+                            f"{z.shape[0]} measurements")  # fmt: skip
+        # −1: no track; the previous update's detections first, then the index
+        det_key, rank, slot_of_det, new = np.empty((4, D), np.int64)
+        prev_rank, prev_slot = self._prev_rank, self._prev_slot
+        # (kept only by an update that completes)
+        self._prev_rank = self._prev_slot = np.zeros(0, dtype=np.int64)
+        n_ask, ordered = 0, True
+        if D:
+            n_ask, ordered = _lookup_by_previous(
+                det_owner, det_intruder, self.n, prev_rank, prev_slot, det_key, rank,
+                slot_of_det, new,
+            )  # fmt: skip
+        if n_ask:
+            ask = new[:n_ask]
+            slot_of_det[ask] = self._index.get(det_key[ask])
+        untracked = -1  # (not counted yet)
+        drop = slot_of_det[:0]  # the slots dropped
+        after = slot_of_det  # the detections' slots after this update (−1: none)
         # 1. step every live track (NaN row: no measurement)
         if len(self):
             cap = t.capacity
             if self._z.shape[0] != cap:
                 self._z = np.empty((cap, 2))
-            untracked = _measurements_by_slot(self._z, slot_of_det, z)
+            if self._detected.size != cap:
+                self._detected = np.empty(cap, dtype=np.bool_)
+            untracked = _measurements_by_slot(self._z, self._detected, slot_of_det, z, new)
             truth = np.asarray(truth_states)[self._intruder] if t.uses_truth else None
             t.step(self._z, truth)
             # 2. age, misses (a gated measurement is a miss), drop
@@ -513,15 +603,34 @@ class TrackTable:
                 self._drop_buf = np.empty(cap, dtype=np.int64)
             n_drop = _advance(
                 np.asarray(t.alive), self._owner, self._intruder, self._misses, self._age,
-                slot_of_det, gated, bool(scanned), self.drop_after,
+                self._detected, gated, bool(scanned), self.drop_after,
                 np.asarray(alive, dtype=np.bool_), self._drop_buf,
             )  # fmt: skip
             if n_drop:
-                self._drop(self._drop_buf[:n_drop].copy())
+                drop = self._drop_buf[:n_drop].copy()
+                if self._mark.size != cap:
+                    self._mark = np.zeros(cap, dtype=np.bool_)
+                after = np.empty_like(slot_of_det)
+                _without_dropped(slot_of_det, drop, self._mark, after)
+                self._drop(drop)
         # 3. births
+        if untracked < 0:  # no track stepped: every detection is new
+            untracked = D
+            new = np.arange(D)
         if untracked:
-            new = slot_of_det < 0
+            new = new[:untracked]
             self._births(time, det_key[new], z[new], truth_states)
+            if ordered:
+                if after is slot_of_det:
+                    after = slot_of_det.copy()
+                after[new] = self._index.get(det_key[new])
+        if D == 0 and prev_rank.size:  # between scans: the last scan's, less the drops
+            rank, after = prev_rank, prev_slot
+            if drop.size:
+                after = np.empty_like(prev_slot)
+                _without_dropped(prev_slot, drop, self._mark, after)
+        if ordered:  # (else the next update asks the index for every detection)
+            self._prev_rank, self._prev_slot = rank, after
 
     def _drop(self, slots: np.ndarray) -> None:
         self.tracker.drop(slots)
@@ -529,9 +638,11 @@ class TrackTable:
         self._owner[slots] = 0
         self._intruder[slots] = 0
 
-    def _start(self, keys: np.ndarray, x0, P0) -> None:
-        """Start tracks for the (sorted, new) ``keys`` (k,) from x0 (k, 5), P0 (k, 5, 5)."""
-        slots = np.asarray(self.tracker.birth(x0, P0), dtype=np.int64)
+    def _start(self, keys: np.ndarray, x0, P0, checked: bool = False) -> None:
+        """Start tracks for the (sorted, new) ``keys`` (k,) from x0 (k, 5), P0 (k, 5, 5)
+        (``checked``: through :meth:`parts.Tracker.birth_checked`)."""
+        t = self.tracker
+        slots = np.asarray(t.birth_checked(x0, P0) if checked else t.birth(x0, P0), np.int64)
         cap = self.tracker.capacity
         if self._owner.size < cap:
             for name in ("_owner", "_intruder", "_misses", "_age"):
@@ -546,6 +657,35 @@ class TrackTable:
         self._index.put(keys, slots)
 
     def _births(self, time, keys, z, truth_states) -> None:
+        """The detections without a track, keys (k,) and z (k, 2): a second detection
+        within the pending window starts a track, the others are (or refresh) pending.
+        One numba pass over the sorted keys and the pending detections
+        (:func:`_pending_births`); where that declines (repeated keys, a pending detection
+        not older than ``time``, initial covariances near the limits of the checks it
+        leaves out), :meth:`_births_reference`, the same rule in numpy."""
+        if self.tracker.uses_truth:
+            self._births_reference(time, keys, z, truth_states)
+            return
+        order = np.argsort(keys, kind="stable")
+        keys, z = keys[order], np.ascontiguousarray(z[order])
+        k, n_pend = keys.size, self._pend_key.size
+        start = np.empty(k, np.int64)
+        x0, P0 = np.empty((k, 5)), np.empty((k, 5, 5))
+        pend = (np.empty(n_pend + k, np.int64), np.empty((n_pend + k, 2)), np.empty(n_pend + k))
+        n_start, n_new = _pending_births(
+            float(time), self.drop_after * self.scan_period_s + 1e-9, keys, z,
+            self._pend_key, self._pend_z, self._pend_t, max(self.sigma, 1.0) ** 2,
+            self._omega_var, MANOEUVRE_VELOCITY_VAR, start, x0, P0, *pend,
+        )  # fmt: skip
+        if n_start < 0:
+            self._births_reference(time, keys, z, truth_states)
+            return
+        if n_start:
+            self._start(start[:n_start], x0[:n_start], P0[:n_start], checked=True)
+        self._pend_key, self._pend_z, self._pend_t = (a[:n_new] for a in pend)
+
+    def _births_reference(self, time, keys, z, truth_states) -> None:
+        """:meth:`_births` in numpy (the reference for :func:`_pending_births`)."""
         order = np.argsort(keys, kind="stable")
         keys, z = keys[order], z[order]
         if self.tracker.uses_truth:  # no initialisation needed: start at once
@@ -599,6 +739,113 @@ class TrackTable:
                 self._pend_key = np.insert(self._pend_key, pos, nk)
                 self._pend_z = np.insert(self._pend_z, pos, z[rest][add], axis=0)
                 self._pend_t = np.insert(self._pend_t, pos, time)
+
+
+#: :func:`_pending_births` starts a track without the tracker's checks of its initial
+#: covariance (:meth:`parts.Tracker.birth_checked`) only when the covariance's smallest
+#: eigenvalue is certainly above this fraction of its largest: per axis
+#: ``[[s², s²/Δt], [s²/Δt, 2s²/Δt² + q]]`` is positive definite for every Δt > 0
+#: (determinant ``s⁴/Δt² + s²q``, smallest eigenvalue at least determinant / trace), and
+#: far above the error of a numerical eigenvalue check (~1e-15 of the largest) it cannot
+#: be judged otherwise. Other starts take the numpy path and its checks.
+_CHECKED_MIN_RATIO = 1e-9
+
+
+@njit(cache=True)
+def _pending_births(
+    time, max_age, keys, z, pend_key, pend_z, pend_t, s2, omega_var, extra_var,
+    start, x0, P0, new_key, new_z, new_t,
+):  # fmt: skip  # pragma: no cover - compiled
+    """:meth:`TrackTable._births_reference` as one merge of the sorted detection ``keys``
+    (k,) (positions ``z`` (k, 2) m) with the pending detections ``pend_key`` (p,) sorted,
+    ``pend_z`` (p, 2) m, ``pend_t`` (p,) s.
+
+    A pending detection older than ``max_age`` s is forgotten; a key that has a pending
+    detection becomes a track start (``start``, ``x0`` (k, 5), ``P0`` (k, 5, 5) filled from
+    0: two-point initialisation with R = s2·I m², Ω = 0, Ω variance ``omega_var``,
+    velocity allowance ``extra_var`` (m/s)², the same arithmetic as
+    :func:`~airspace_sim.tracking.initialisation.two_point_initialisation`); the other keys
+    join the pending ones in ``new_key``, ``new_z``, ``new_t`` (sorted). Returns
+    ``(track starts, pending detections)``, or ``(-1, -1)`` with nothing written where
+    the reference path must decide: repeated keys, a pending detection not older than
+    ``time`` (it would be refreshed), an initial covariance not certainly positive definite
+    (:data:`_CHECKED_MIN_RATIO`) or a start that is not finite.
+    """
+    k, p = keys.size, pend_key.size
+    for q in range(1, k):
+        if keys[q] <= keys[q - 1]:
+            return -1, -1
+    # first pass: decide, without writing, whether this path applies
+    i = 0
+    for q in range(k):
+        while i < p and (pend_key[i] < keys[q] or not (time - pend_t[i]) <= max_age):
+            i += 1
+        if i < p and pend_key[i] == keys[q]:
+            d = time - pend_t[i]
+            if not d > 0.0:
+                return -1, -1
+            # the per-axis block's trace and determinant (the latter as a sum of positive
+            # terms), and the turn-rate variance: eigenvalues certainly well apart from 0
+            trace = s2 + (2.0 * s2 / (d * d) + extra_var)
+            det = s2 * s2 / (d * d) + s2 * extra_var
+            big = max(trace, omega_var)
+            if not (big < 1e300 and det / trace >= _CHECKED_MIN_RATIO * big):
+                return -1, -1
+            if not (omega_var >= _CHECKED_MIN_RATIO * big and extra_var >= 0.0):
+                return -1, -1
+            i += 1
+    n_start = 0
+    n_new = 0
+    i = 0
+    for q in range(k + 1):
+        # pending detections before this key stay, if fresh
+        while i < p and (q == k or pend_key[i] < keys[q]):
+            if (time - pend_t[i]) <= max_age:
+                new_key[n_new] = pend_key[i]
+                new_z[n_new, 0] = pend_z[i, 0]
+                new_z[n_new, 1] = pend_z[i, 1]
+                new_t[n_new] = pend_t[i]
+                n_new += 1
+            i += 1
+        if q == k:
+            break
+        if i < p and pend_key[i] == keys[q] and (time - pend_t[i]) <= max_age:
+            d = time - pend_t[i]
+            b = n_start
+            start[b] = keys[q]
+            x0[b, 0] = z[q, 0]
+            x0[b, 2] = z[q, 1]
+            x0[b, 1] = (z[q, 0] - pend_z[i, 0]) / d
+            x0[b, 3] = (z[q, 1] - pend_z[i, 1]) / d
+            x0[b, 4] = 0.0
+            P0[b] = 0.0
+            rd = s2 / d
+            vv = 2.0 * s2 / (d * d) + extra_var
+            for a in range(2):
+                pa, va = 2 * a, 2 * a + 1  # x, vx; y, vy
+                P0[b, pa, pa] = s2
+                P0[b, pa, va] = rd
+                P0[b, va, pa] = rd
+                P0[b, va, va] = vv
+            P0[b, 4, 4] = omega_var
+            n_start += 1
+            i += 1
+        else:  # a stale pending detection of this key is passed over by the loop above
+            if i < p and pend_key[i] == keys[q]:
+                i += 1
+            new_key[n_new] = keys[q]
+            new_z[n_new, 0] = z[q, 0]
+            new_z[n_new, 1] = z[q, 1]
+            new_t[n_new] = time
+            n_new += 1
+    for b in range(n_start):
+        for c in range(5):
+            if not np.isfinite(x0[b, c]):
+                return -1, -1
+            for e in range(5):
+                if not np.isfinite(P0[b, c, e]):
+                    return -1, -1
+    return n_start, n_new
 
 
 def _sorted_lookup(sorted_keys: np.ndarray, query: np.ndarray) -> np.ndarray:
