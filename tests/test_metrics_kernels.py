@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from airspace_sim.world.metrics import _closest_pair_distance
+from airspace_sim.world.metrics import WorldMetrics, _closest_pair_distance, _track_errors
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -28,3 +28,25 @@ def test_closest_pair_distance_equals_the_numpy_minimum(seed):
     got = _closest_pair_distance(keys.astype(np.int64), n, pos)
     assert got == ref
     assert _closest_pair_distance(np.zeros(0, np.int64), n, pos) == np.inf
+
+
+@pytest.mark.parametrize("p", [0, 1, 7, 45_000])
+def test_track_errors_equal_the_numpy_differences_and_their_sum(p):
+    """:meth:`WorldMetrics.track_states` adds what :meth:`WorldMetrics.tracking` of
+    ``x[:, 0:3:2]`` and the gathered true positions adds, bit for bit."""
+    rng = np.random.default_rng(p)
+    n = 1000
+    positions = rng.uniform(-1e5, 1e5, (n, 2))
+    intruder = rng.integers(0, n, p)
+    x = rng.normal(0.0, 50.0, (p, 5))
+    x[:, 0] += positions[intruder, 0]
+    x[:, 2] += positions[intruder, 1]
+    if p:
+        e = _track_errors(x, intruder, positions)
+        np.testing.assert_array_equal(e, x[:, 0:3:2] - positions[intruder])
+        assert e.flags.c_contiguous
+    a, b = WorldMetrics(n, 3000.0, 152.4, 1.0), WorldMetrics(n, 3000.0, 152.4, 1.0)
+    for _ in range(2):
+        a.tracking(x[:, 0:3:2], np.take(positions, intruder, axis=0))
+        b.track_states(x, intruder, positions)
+    assert a.sq_err == b.sq_err and a.track_samples == b.track_samples == 2 * p

@@ -306,6 +306,19 @@ def _closest_pair_distance(keys, n, positions):  # pragma: no cover - compiled
     return best
 
 
+@njit(cache=True)
+def _track_errors(x, intruder, positions):  # pragma: no cover - compiled
+    """(P, 2) m: ``x[:, [0, 2]] − positions[intruder]``, track state rows x (P, ≥3)
+    ``[x, vx, y, …]``, intruder (P,) int64, positions (N, 2) m (the numpy expression's
+    differences, in a C-contiguous array)."""
+    e = np.empty((x.shape[0], 2))
+    for p in range(x.shape[0]):
+        t = intruder[p]
+        e[p, 0] = x[p, 0] - positions[t, 0]
+        e[p, 1] = x[p, 2] - positions[t, 1]
+    return e
+
+
 #: up to this many active aircraft, :meth:`WorldMetrics.safety` tests all their pairs
 #: (at most 496) instead of building the grid, whose set-up costs more than that
 _ONE_CELL = 32
@@ -510,9 +523,25 @@ class WorldMetrics:
     def tracking(self, track_pos, true_pos, mode_est=None, mode_true=None):
         """Add (P, 2) estimated vs true positions; optional (Q,) modes to compare."""
         if len(track_pos):
-            e = np.asarray(track_pos) - np.asarray(true_pos)
-            self.sq_err += float(np.einsum("ij,ij->", e, e))
-            self.track_samples += len(track_pos)
+            self._add_errors(np.asarray(track_pos) - np.asarray(true_pos))
+        self._add_modes(mode_est, mode_true)
+
+    def track_states(self, x, intruder, positions, mode_est=None, mode_true=None):
+        """:meth:`tracking` of the track states ``x`` (P, ≥3) ``[x, vx, y, …]`` of the
+        intruders ``intruder`` (P,) int against their true ``positions`` (N, 2) m: the
+        same errors (:func:`_track_errors`), without a strided copy and a gather."""
+        if len(x):
+            x = np.ascontiguousarray(x, dtype=float)
+            pos = np.ascontiguousarray(positions, dtype=float)
+            self._add_errors(_track_errors(x, np.ascontiguousarray(intruder, np.int64), pos))
+        self._add_modes(mode_est, mode_true)
+
+    def _add_errors(self, e):
+        """Add the (P, 2) position errors ``e``, m (C-contiguous)."""
+        self.sq_err += float(np.einsum("ij,ij->", e, e))
+        self.track_samples += len(e)
+
+    def _add_modes(self, mode_est, mode_true):
         if mode_est is not None and len(mode_est):
             self.mode_hits += int(np.count_nonzero(mode_est == mode_true))
             self.mode_samples += len(mode_est)
