@@ -93,7 +93,11 @@ def _mix_scalar(z):  # pragma: no cover - compiled
 
 @njit(cache=True)
 def _directed_pairs_kernel(i, j, owners, present, keys):  # pragma: no cover - compiled
-    """:func:`directed_pairs` (checked arguments)."""
+    """:func:`directed_pairs` (checked arguments). The intruder's half of :func:`pair_keys`,
+    ``mix(keys[t] + golden)``, is taken once per aircraft (N), not once per pair."""
+    as_intruder = np.empty(keys.size, dtype=np.uint64)
+    for t in range(keys.size):
+        as_intruder[t] = _mix_scalar(keys[t] + _GOLDEN)
     p = i.size
     owner = np.empty(2 * p, dtype=np.int64)
     intruder = np.empty(2 * p, dtype=np.int64)
@@ -105,7 +109,7 @@ def _directed_pairs_kernel(i, j, owners, present, keys):  # pragma: no cover - c
             o, t = a[q], b[q]
             if owners[o] and present[o] and present[t]:
                 owner[d], intruder[d] = o, t
-                pk[d] = _mix_scalar(keys[o] ^ _mix_scalar(keys[t] + _GOLDEN))
+                pk[d] = _mix_scalar(keys[o] ^ as_intruder[t])
                 d += 1
     return owner[:d], intruder[:d], pk[:d]
 
