@@ -105,6 +105,26 @@ def _exact_pairs(keys, ci, cj, positions, d2):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def _kinematic_step(positions, velocities, live, dt, out):  # pragma: no cover - compiled
+    """Chipmunk's kinematic update ``p ← p + v·dt`` of the aircraft ``live`` (N,) bool, in
+    ``positions`` (N, 2) m and copied to ``out`` (N, 2), velocities (N, 2) m/s, dt s.
+    Returns the largest speed ``√(vx² + vy²)`` of a live aircraft, m/s (NaN if one is NaN,
+    as numpy's max; −1 if none is live)."""
+    fastest = -1.0
+    for i in range(live.size):
+        if live[i]:
+            vx, vy = velocities[i, 0], velocities[i, 1]
+            positions[i, 0] = positions[i, 0] + vx * dt
+            positions[i, 1] = positions[i, 1] + vy * dt
+            out[i, 0], out[i, 1] = positions[i, 0], positions[i, 1]
+            speed = np.sqrt(vx * vx + vy * vy)
+            if speed > fastest or speed != speed:
+                if fastest == fastest:  # the first NaN stays
+                    fastest = speed
+    return fastest
+
+
+@njit(cache=True)
 def _new_keys(now, before):  # pragma: no cover - compiled
     """The sorted keys of ``now`` (sorted, unique) that are not in ``before`` (sorted,
     unique): one merge."""
@@ -295,12 +315,11 @@ class Airspace:
     def step(self, dt: float, out_positions: np.ndarray) -> None:
         """Advance ``dt`` seconds; write the new positions of the aircraft in the space into
         ``out_positions`` (N, 2) and update :attr:`pairs` / :attr:`began`."""
-        live = self.in_space
-        if live.any():
-            v = self._velocities[live]
-            self.positions[live] += v * dt  # chipmunk's kinematic update: p + v·dt
-            self._flown += float(np.sqrt((v * v).sum(axis=1)).max()) * abs(dt)
-            out_positions[live] = self.positions[live]
+        fastest = _kinematic_step(
+            self.positions, self._velocities, self.in_space, float(dt), out_positions
+        )
+        if fastest >= 0.0 or fastest != fastest:  # some aircraft in the space (NaN: a NaN speed)
+            self._flown += fastest * abs(dt)
         if 2.0 * self._flown > self.margin * (1.0 - _MARGIN_SLACK):
             self._refresh()
         self._update_sets()
