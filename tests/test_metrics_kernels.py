@@ -25,9 +25,10 @@ def test_closest_pair_distance_equals_the_numpy_minimum(seed):
     rng.shuffle(keys)
     a, b = keys // n, keys % n
     ref = np.hypot(*(pos[a] - pos[b]).T).min()
-    got = _closest_pair_distance(keys.astype(np.int64), n, pos)
+    got = _closest_pair_distance(a.astype(np.int64), b.astype(np.int64), pos)
     assert got == ref
-    assert _closest_pair_distance(np.zeros(0, np.int64), n, pos) == np.inf
+    none = np.zeros(0, np.int64)
+    assert _closest_pair_distance(none, none, pos) == np.inf
 
 
 @pytest.mark.parametrize("p", [0, 1, 7, 45_000])
@@ -50,3 +51,20 @@ def test_track_errors_equal_the_numpy_differences_and_their_sum(p):
         a.tracking(x[:, 0:3:2], np.take(positions, intruder, axis=0))
         b.track_states(x, intruder, positions)
     assert a.sq_err == b.sq_err and a.track_samples == b.track_samples == 2 * p
+
+
+def test_contacts_with_the_range_pairs_aircraft_equal_contacts_from_the_keys():
+    from airspace_sim.world.bodies import LOS, NMAC, RANGE
+
+    rng = np.random.default_rng(9)
+    n = 200
+    pos = rng.uniform(-2e4, 2e4, (n, 2))
+    i, j = np.triu_indices(n, 1)
+    keep = np.hypot(*(pos[i] - pos[j]).T) < 8000.0
+    i, j = i[keep], j[keep]
+    pairs = {LOS: np.zeros(0, np.int64), NMAC: np.zeros(0, np.int64), RANGE: i * n + j}
+    began = {t: np.zeros((0, 2), np.int64) for t in (LOS, NMAC, RANGE)}
+    a, b = WorldMetrics(n, 3000.0, 152.4, 1.0), WorldMetrics(n, 3000.0, 152.4, 1.0)
+    a.contacts(pos, pairs, began)
+    b.contacts(pos, pairs, began, (i, j))
+    assert np.isfinite(a.min_sep) and a.min_sep == b.min_sep

@@ -285,16 +285,16 @@ def _pair_scan(
 
 
 @njit(cache=True, error_model="numpy")
-def _closest_pair_distance(keys, n, positions):  # pragma: no cover - compiled
-    """``min over keys of hypot(positions[i] − positions[j])``, m, for pair keys
-    ``i·n + j`` (P,) int64 and positions (N, 2) m (``inf`` for no key): the numpy
-    expression's value, with ``hypot`` (libm, as numpy's) evaluated only for pairs whose
-    squared distance is within a relative 1e-9 of the smallest so far (``hypot`` and the
-    rounded square differ by far less), not for all of them."""
+def _closest_pair_distance(ci, cj, positions):  # pragma: no cover - compiled
+    """``min over pairs of hypot(positions[i] − positions[j])``, m, for the pairs of
+    aircraft ``ci``, ``cj`` (P,) int64 and positions (N, 2) m (``inf`` for no pair): the
+    numpy expression's value, with ``hypot`` (libm, as numpy's) evaluated only for pairs
+    whose squared distance is within a relative 1e-9 of the smallest so far (``hypot`` and
+    the rounded square differ by far less), not for all of them."""
     best = np.inf
     best2 = np.inf
-    for p in range(keys.size):
-        i, j = keys[p] // n, keys[p] % n
+    for p in range(ci.size):
+        i, j = ci[p], cj[p]
         dx = positions[i, 0] - positions[j, 0]
         dy = positions[i, 1] - positions[j, 1]
         d2 = dx * dx + dy * dy
@@ -374,12 +374,14 @@ class WorldMetrics:
         self.arrival = np.full(n, np.nan)  # s, when the aircraft finished its plan
         self._active = np.ones(n, dtype=bool)
 
-    def contacts(self, positions, pairs: dict, began: dict):
+    def contacts(self, positions, pairs: dict, began: dict, range_ij=None):
         """Record this step's pair sets and new episodes.
 
         positions : (N, 2) m; pairs : set → (P,) sorted keys ``i·N + j`` (``i < j``) of the
         pairs overlapping now, began : set → (E, 2) pairs that began overlapping in the last
-        step (:class:`~.bodies.Airspace` ``pairs`` / ``began``; sets LOS, NMAC, RANGE).
+        step (:class:`~.bodies.Airspace` ``pairs`` / ``began``; sets LOS, NMAC, RANGE);
+        range_ij : optional ``(i, j)`` (P,) int64 aircraft of ``pairs[RANGE]``, in its
+        order (:meth:`~.bodies.Airspace.pair_arrays`), so as not to divide the keys.
 
         Pymunk's sets are sampled at step instants; two aircraft closing at 460 m/s can jump
         over the 152 m NMAC circle in a 1 s step. So for pairs in LoS now or at the previous
@@ -419,7 +421,11 @@ class WorldMetrics:
         self.nmac_keys.update(int(k) for k in nmac_keys)
         self.los_pair_steps += int(los_keys.size)
         if range_keys.size:
-            d = _closest_pair_distance(range_keys, n, np.ascontiguousarray(positions, dtype=float))
+            ri, rj = (range_keys // n, range_keys % n) if range_ij is None else range_ij
+            pos = np.ascontiguousarray(positions, dtype=float)
+            d = _closest_pair_distance(
+                np.ascontiguousarray(ri, np.int64), np.ascontiguousarray(rj, np.int64), pos
+            )
             self.min_sep = min(self.min_sep, float(d))
         if los_keys.size:
             i, j = los_keys // n, los_keys % n

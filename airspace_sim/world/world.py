@@ -401,7 +401,7 @@ class World:
         """Phase 6: contacts, conflicts and (``tracking``) track errors."""
         m = self.metrics_acc
         sp = self.airspace
-        m.contacts(self.positions, sp.pairs, sp.began)
+        m.contacts(self.positions, sp.pairs, sp.began, sp.pair_arrays(RANGE))
         m.conflicts(self.conflict)
         m.safety(
             self.time,
