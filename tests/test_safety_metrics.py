@@ -116,16 +116,22 @@ def _predicted_scalar(s, v, r_safe, lookahead):
     return math.hypot(*(s + t * v)) < r_safe
 
 
-def test_pair_scan_over_many_grid_cells_matches_brute_force():
-    # slow aircraft and a short look-ahead: cells ~2 km wide over a 30 km square, so pairs
-    # straddle cells; every flag must match the scalar definitions over all pairs
+@pytest.mark.parametrize("look", [10.0, 60.0])
+def test_pair_scan_over_many_grid_cells_matches_brute_force(look):
+    # slow aircraft and a short look-ahead: cells ~2-3 km wide over a 30 km square, so
+    # pairs straddle cells; every flag must match the scalar definitions over all pairs.
+    # Well clear's reach is the larger with a 10 s look-ahead, the prediction's with 60 s
     rng = np.random.default_rng(5)
-    n, r_safe, look = 300, 300.0, 10.0
+    n, r_safe = 300, 300.0
     pos = rng.uniform(-15000, 15000, (n, 2))
     vel = rng.uniform(-14, 14, (n, 2))
     following = rng.random(n) < 0.2
     active = rng.random(n) < 0.9
-    assert pair_reach(np.hypot(*vel.T).max(), DMOD_M, TAU_MOD_S, r_safe, look) < 2500
+    wcv_reach, pred_reach = pair_reaches(np.hypot(*vel.T).max(), DMOD_M, TAU_MOD_S, r_safe, look)
+    assert max(wcv_reach, pred_reach) < 3000 and (wcv_reach > pred_reach) == (look == 10.0)
+    assert pair_reach(np.hypot(*vel.T).max(), DMOD_M, TAU_MOD_S, r_safe, look) == max(
+        wcv_reach, pred_reach
+    )
     m, wcv, pred = safety_and_brute_force(pos, vel, active, following, r_safe, look)
     assert len(wcv) > 20 and len(pred) > 5
     assert (
@@ -138,13 +144,17 @@ def test_pair_scan_over_many_grid_cells_matches_brute_force():
     assert len(m._predicted) == len(pred) and (m._predicted.get(sorted(pred)) >= 0).all()
 
 
-def test_pair_scan_flags_pairs_at_the_edge_of_the_reach():
+@pytest.mark.parametrize("follow", [False, True])
+def test_pair_scan_flags_pairs_at_the_edge_of_the_reach(follow):
     # head-on pairs of the fastest aircraft at the farthest distances each test can flag
     # (inside its reach by the reach's slack only), ∓ 2 m: a predicted conflict at
     # d = r_safe + look·2v, a well-clear violation at the positive root of
     # d² − τ·2v·d − DMOD² = 0 (τ_mod = τ*, HMD 0); and pairs on DMOD. The nearer pair of
-    # each edge is flagged, the farther not. 40 aircraft, so the scan uses the grid; both
-    # sets must be those of the scalar definitions over all pairs
+    # each edge is flagged, the farther not. 44 aircraft, so the scan uses the grid; both
+    # sets must be those of the scalar definitions over all pairs. With ``follow`` one
+    # aircraft of each pair follows the policy: its pairs are never predicted, and their
+    # well clear is scanned on the grid of well clear's own reach (the aircraft that do
+    # not follow, on the prediction's)
     v, r_safe, look = 230.0, 3000.0, 120.0
     pred_edge = r_safe + look * 2 * v
     wcv_edge = 0.5 * (TAU_MOD_S * 2 * v + math.sqrt((TAU_MOD_S * 2 * v) ** 2 + 4 * DMOD_M**2))
@@ -164,8 +174,14 @@ def test_pair_scan_flags_pairs_at_the_edge_of_the_reach():
     wcv_reach, pred_reach = pair_reaches(np.hypot(*vel.T).max(), DMOD_M, TAU_MOD_S, r_safe, look)
     assert pred_edge < pred_reach < pred_edge + 100.0 and wcv_edge < wcv_reach < wcv_edge + 2
     active, following = np.ones(n, bool), np.zeros(n, bool)
+    if follow:
+        following[1 : 2 * len(apart) : 2] = True
+        following[-8:] = True  # and some of the far traffic
     m, wcv, pred = safety_and_brute_force(pos, vel, active, following, r_safe, look)
-    assert 0 * n + 1 in pred and 2 * n + 3 not in pred
+    if follow:
+        assert not pred & {2 * k * n + 2 * k + 1 for k in range(len(apart))}
+    else:
+        assert 0 * n + 1 in pred and 2 * n + 3 not in pred
     assert 4 * n + 5 in wcv and 6 * n + 7 not in wcv
     assert {8 * n + 9, 10 * n + 11, 12 * n + 13} <= wcv
     assert len(m._predicted) == len(pred) and (m._predicted.get(sorted(pred)) >= 0).all()

@@ -79,7 +79,7 @@ def test_radar_measure_same_bits(pd, sigma):
 @pytest.mark.parametrize("size", [1560, 0, 1, 511, 512, 513, 5000])
 def test_add_normals_equals_two_normal_draws(size):
     """The one-pass noise of both axes adds the numbers of two :func:`normal_numpy` draws
-    (the kernel evaluates them in chunks of 512 keys, reordered by cos argument)."""
+    (one pass in key order)."""
     keys = _keys(80)[:size]
     z = np.random.default_rng(2).uniform(-1e5, 1e5, (keys.size, 2))
     ref = z.copy()

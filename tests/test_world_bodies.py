@@ -20,6 +20,7 @@ from airspace_sim.world.bodies import (
     Airspace,
     _delete_sorted,
     _insert_sorted,
+    _kinematic_step,
 )
 
 
@@ -359,3 +360,30 @@ def test_arbiter_bodies_map_to_aircraft_with_and_without_the_id_map():
 def _by_id(sp, ids):
     bodies = {b.id: b for b in sp.bodies}
     return [bodies[int(x)] for x in ids]
+
+
+@pytest.mark.parametrize("case", ["all", "some", "none", "nan"])
+def test_kinematic_step_equals_the_numpy_update(case):
+    """``_kinematic_step`` moves the live rows as ``positions[live] += v[live]·dt`` and
+    returns numpy's ``max(sqrt((v·v).sum(axis=1)))`` over them (NaN kept; −1 if none)."""
+    rng = np.random.default_rng(7)
+    n, dt = 50, 1.0 / 3.0
+    pos = rng.uniform(-1e5, 1e5, (n, 2))
+    vel = rng.uniform(-300, 300, (n, 2))
+    live = {"all": np.ones(n, bool), "some": rng.random(n) < 0.5, "none": np.zeros(n, bool)}
+    live = live.get(case, np.ones(n, bool))
+    if case == "nan":
+        vel[3, 1] = np.nan
+    ref_pos, ref_out = pos.copy(), np.zeros((n, 2))
+    if live.any():
+        v = vel[live]
+        ref_pos[live] += v * dt
+        ref_fast = float(np.sqrt((v * v).sum(axis=1)).max())
+        ref_out[live] = ref_pos[live]
+    else:
+        ref_fast = -1.0
+    out = np.zeros((n, 2))
+    fast = _kinematic_step(pos, vel, live, dt, out)
+    np.testing.assert_array_equal(pos, ref_pos)
+    np.testing.assert_array_equal(out, ref_out)
+    assert fast == ref_fast or (np.isnan(fast) and np.isnan(ref_fast))

@@ -93,7 +93,11 @@ def _mix_scalar(z):  # pragma: no cover - compiled
 
 @njit(cache=True)
 def _directed_pairs_kernel(i, j, owners, present, keys):  # pragma: no cover - compiled
-    """:func:`directed_pairs` (checked arguments)."""
+    """:func:`directed_pairs` (checked arguments). The intruder's half of :func:`pair_keys`,
+    ``mix(keys[t] + golden)``, is taken once per aircraft (N), not once per pair."""
+    as_intruder = np.empty(keys.size, dtype=np.uint64)
+    for t in range(keys.size):
+        as_intruder[t] = _mix_scalar(keys[t] + _GOLDEN)
     p = i.size
     owner = np.empty(2 * p, dtype=np.int64)
     intruder = np.empty(2 * p, dtype=np.int64)
@@ -105,7 +109,7 @@ def _directed_pairs_kernel(i, j, owners, present, keys):  # pragma: no cover - c
             o, t = a[q], b[q]
             if owners[o] and present[o] and present[t]:
                 owner[d], intruder[d] = o, t
-                pk[d] = _mix_scalar(keys[o] ^ _mix_scalar(keys[t] + _GOLDEN))
+                pk[d] = _mix_scalar(keys[o] ^ as_intruder[t])
                 d += 1
     return owner[:d], intruder[:d], pk[:d]
 
@@ -145,59 +149,26 @@ def _normal_kernel(keys, word1, word2):  # pragma: no cover - compiled
     return out
 
 
-#: cos arguments per :func:`_add_normals_kernel` chunk (two per key), and the buckets by
-#: argument they are evaluated in
-_NORMALS_CHUNK = 1024
-_COS_BUCKETS = 64
-
-
 @njit(cache=True)
 def _add_normals_kernel(z, keys, scale, w1x, w2x, w1y, w2y):  # pragma: no cover - compiled
     """``z[p, 0] += scale·normal_x[p]``, ``z[p, 1] += scale·normal_y[p]`` in place, z (P, 2),
     keys (P,) uint64; the normals of two streams (counter words ``w1x, w2x`` and
     ``w1y, w2y``), each ``√(−2 ln u1)·cos(2π u2)`` exactly as :func:`draw_normal`.
 
-    libm's cos branches on its argument's range (direct polynomial, π/2 − x, or a quadrant
-    reduction and the quadrant's sign and function); over arguments in random order the
-    branches are mispredicted and the cos takes 2.5 times as long as over sorted ones. So
-    the keys go in chunks of ``_NORMALS_CHUNK / 2``: the radii and arguments of a chunk
-    first, then its cos evaluated bucket by bucket of the argument (a counting sort into
-    :data:`_COS_BUCKETS` equal ranges of ``u2``, within the chunk so the scratch stays in
-    cache). Each number is the same function of the same argument, so the same bits.
+    One pass in key order. libm's cos branches on its argument's range, and over random
+    arguments those branches are mispredicted; evaluating a chunk's cos sorted by argument
+    (a counting sort per chunk of keys) was faster on one CPU and slower on another, where
+    the extra passes cost more than the mispredictions (``docs/performance.md``).
     """
-    zf = z.reshape(-1)  # normal q of key p is at 2p + axis
-    rad = np.empty(_NORMALS_CHUNK)
-    arg = np.empty(_NORMALS_CHUNK)
-    bucket = np.empty(_NORMALS_CHUNK, dtype=np.int64)
-    order = np.empty(_NORMALS_CHUNK, dtype=np.int64)
-    start = np.empty(_COS_BUCKETS + 1, dtype=np.int64)
-    half = _NORMALS_CHUNK // 2
-    for c0 in range(0, keys.size, half):
-        c1 = min(c0 + half, keys.size)
-        m = 2 * (c1 - c0)
-        start[:] = 0
-        for p in range(c0, c1):
-            k = keys[p]
-            q = 2 * (p - c0)
-            for axis in range(2):
-                w1 = w1x if axis == 0 else w1y
-                w2 = w2x if axis == 0 else w2y
-                u1 = 1.0 - draw_uniform(k, w1)  # (0, 1]
-                u2 = draw_uniform(k, w2)
-                rad[q + axis] = np.sqrt(-2.0 * np.log(u1))
-                arg[q + axis] = 2.0 * np.pi * u2
-                b = np.int64(u2 * _COS_BUCKETS)  # u2 < 1
-                bucket[q + axis] = b
-                start[b + 1] += 1
-        for b in range(_COS_BUCKETS):
-            start[b + 1] += start[b]
-        for q in range(m):
-            b = bucket[q]
-            order[start[b]] = q
-            start[b] += 1
-        for t in range(m):
-            q = order[t]
-            zf[2 * c0 + q] += scale * (rad[q] * np.cos(arg[q]))
+    zf = z.reshape(-1)  # normal of key p on an axis is at 2p + axis
+    for p in range(keys.size):
+        k = keys[p]
+        for axis in range(2):
+            w1 = w1x if axis == 0 else w1y
+            w2 = w2x if axis == 0 else w2y
+            u1 = 1.0 - draw_uniform(k, w1)  # (0, 1]
+            u2 = draw_uniform(k, w2)
+            zf[2 * p + axis] += scale * (np.sqrt(-2.0 * np.log(u1)) * np.cos(2.0 * np.pi * u2))
 
 
 def add_normals(

@@ -401,7 +401,7 @@ class World:
         """Phase 6: contacts, conflicts and (``tracking``) track errors."""
         m = self.metrics_acc
         sp = self.airspace
-        m.contacts(self.positions, sp.pairs, sp.began)
+        m.contacts(self.positions, sp.pairs, sp.began, sp.pair_arrays(RANGE))
         m.conflicts(self.conflict)
         m.safety(
             self.time,
@@ -424,8 +424,7 @@ class World:
             if markov.any() and np.isfinite(mu).all():
                 est_mode = np.argmax(mu, axis=1)
                 true_mode = modes[view.intruder[markov]]
-        true_pos = np.take(self.positions, view.intruder, axis=0)
-        m.tracking(view.x[:, 0:3:2], true_pos, est_mode, true_mode)
+        m.track_states(view.x, view.intruder, self.positions, est_mode, true_mode)
 
     def _velocities(self) -> np.ndarray:
         """(N, 2) m/s from speeds and headings (0 for aircraft that left)."""
