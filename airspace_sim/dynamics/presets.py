@@ -61,6 +61,16 @@ class Preset:
         mode's Ω random walk, replacing ``ct_sigma_turn_rate`` for that mode (e.g. a
         steady turn and a roll-in/roll-out turn whose rate changes fast); entries of
         known-rate modes are not used.
+    along_track_acceleration : optional (M,) bools: the filter's modes that are a
+        coordinated turn at the estimated rate *with the along-track acceleration in the
+        state* (:mod:`airspace_sim.tracking.along_track`); the filter's state is then
+        ``[x, vx, y, vy, Ω, a]`` for every mode (:attr:`n_state` 6), the other modes carry
+        ``a`` pinned at 0 (with ``pin_turn_rate``; else as a constant). Such a mode's Ω is
+        estimated as for ``estimated_turn_rate`` and its ``a`` is a random walk of
+        ``filter_mode_sigma_along_track`` (m/s² per √s; Q_aa = σ² dt). The truth generator
+        flies such a mode at its ``turn_rates`` entry, at constant speed.
+    filter_mode_sigma_along_track : optional (M,) σ (m/s² per √s) of each along-track
+        mode's acceleration random walk (entries of other modes are not used).
     tracker : optional preset, the model the tracker assumes (:meth:`filter_model`) when it
         is not the traffic's: the traffic flies this preset's modes, and the world's and
         the recorded-flight trackers run ``tracker``'s (its own modes, Π, Q), at this
@@ -91,6 +101,8 @@ class Preset:
     filter_mode_sigma_accel: tuple = None
     filter_mode_sigma_turn_rate: tuple = None
     tracker: Preset = None
+    along_track_acceleration: tuple = None
+    filter_mode_sigma_along_track: tuple = None
 
     def __post_init__(self):
         where = f"preset {self.name!r}"
@@ -139,6 +151,21 @@ class Preset:
             if len(ct) != M:
                 raise UserError(f"{where}: estimated_turn_rate must have {M} flags, got {len(ct)}")
             set_("estimated_turn_rate", ct)
+        if self.along_track_acceleration is not None:
+            at = tuple(bool(v) for v in np.asarray(self.along_track_acceleration).reshape(-1))
+            if len(at) != M:
+                raise UserError(
+                    f"{where}: along_track_acceleration must have {M} flags, got {len(at)}"
+                )
+            set_("along_track_acceleration", at)
+        if self.filter_mode_sigma_along_track is not None:
+            st = np.asarray(self.filter_mode_sigma_along_track, dtype=float).reshape(-1)
+            if st.shape != (M,) or not np.all(np.isfinite(st) & (st >= 0)):
+                raise UserError(
+                    f"{where}: filter_mode_sigma_along_track must be {M} non-negative m/s² per "
+                    f"√s, got {st.tolist()}"
+                )
+            set_("filter_mode_sigma_along_track", tuple(st.tolist()))
         if self.filter_mode_sigma_accel is not None:
             sa = np.asarray(self.filter_mode_sigma_accel, dtype=float).reshape(-1)
             if sa.shape != (M,) or not np.all(np.isfinite(sa) & (sa >= 0)):
@@ -163,10 +190,24 @@ class Preset:
         return len(self.turn_rates)
 
     def estimated(self) -> np.ndarray:
-        """(M,) bool: the filter's estimated-rate (EKF coordinated-turn) modes."""
-        if self.estimated_turn_rate is None:
+        """(M,) bool: the filter's estimated-rate (EKF coordinated-turn) modes, with or
+        without along-track acceleration."""
+        est = np.zeros(self.n_modes, dtype=bool)
+        if self.estimated_turn_rate is not None:
+            est |= np.asarray(self.estimated_turn_rate, dtype=bool)
+        return est | self.along_track()
+
+    def along_track(self) -> np.ndarray:
+        """(M,) bool: the filter's modes with the along-track acceleration in the state."""
+        if self.along_track_acceleration is None:
             return np.zeros(self.n_modes, dtype=bool)
-        return np.asarray(self.estimated_turn_rate, dtype=bool)
+        return np.asarray(self.along_track_acceleration, dtype=bool)
+
+    @property
+    def n_state(self) -> int:
+        """The filter's state size: 5 (``[x, vx, y, vy, Ω]``), or 6 with an along-track
+        mode (``[x, vx, y, vy, Ω, a]``)."""
+        return 6 if self.along_track().any() else models.N_STATE
 
     def turning_modes(self) -> np.ndarray:
         """(M,) bool: the modes that model a turn (a non-zero known rate, or estimated)."""
@@ -181,6 +222,7 @@ class Preset:
             deg = math.degrees(abs(w))
             side = "left" if w > 0 else "right"
             names.append("turn" if est else "straight" if w == 0 else f"{side} {deg:.3g}°/s")
+        names = [f"{v} + speed" if at else v for v, at in zip(names, self.along_track())]
         if len(set(names)) < len(names) and self.filter_mode_sigma_accel is not None:
             # modes alike but for their noise (a quiet and a manoeuvring CV mode)
             names = [f"{v} {sa:g} m/s²" for v, sa in zip(names, self.filter_mode_sigma_accel)]
@@ -256,15 +298,42 @@ class Preset:
         # the estimated-rate flags and dt only when there are such modes, so the arguments
         # of a linear model stay those of any linear-Gaussian IMM (filterpy's included)
         extra = dict(estimated_turn_rate=est, dt=self.dt) if est.any() else {}
+        F, H, U = self.transitions(), models.position_measurement_matrix(), self.turn_rate_offsets()
+        at = self.along_track()
+        if at.any():
+            F, Q, H, U = self._with_along_track(F, Q, H, U, at)
+            extra["along_track_acceleration"] = at
         return dict(
             **extra,
-            transitions=self.transitions(),
+            transitions=F,
             process_noise=Q,
-            measurement_matrix=models.position_measurement_matrix(),
+            measurement_matrix=H,
             measurement_noise=models.measurement_noise(self.measurement_sigma),
             transition_matrix=np.asarray(self.transition_matrix, dtype=float),
-            offsets=self.turn_rate_offsets(),
+            offsets=U,
         )
+
+    def _with_along_track(self, F, Q, H, U, at):
+        """The 5-state F (M, 5, 5), Q (M, 5, 5), H (2, 5), U (M, 5) in the 6-state layout
+        ``[x, vx, y, vy, Ω, a]``: ``a`` pinned at 0 in the other modes (with
+        ``pin_turn_rate``; else carried unchanged), a random walk of
+        ``filter_mode_sigma_along_track`` in the along-track modes (whose F is not used)."""
+        M, n = self.n_modes, 6
+        F6 = np.zeros((M, n, n))
+        F6[:, :5, :5] = F
+        F6[:, 5, 5] = 0.0 if self.pin_turn_rate else 1.0
+        F6[at, 5, 5] = 1.0
+        sigma = np.zeros(M)
+        if self.filter_mode_sigma_along_track is not None:
+            sigma = np.asarray(self.filter_mode_sigma_along_track)
+        Q6 = np.zeros((M, n, n))
+        Q6[:, :5, :5] = Q
+        Q6[:, 5, 5] = np.where(at, sigma**2 * self.dt, 0.0)
+        H6 = np.zeros((H.shape[0], n))
+        H6[:, :5] = H
+        U6 = np.zeros((M, n))
+        U6[:, :5] = U
+        return F6, Q6, H6, U6
 
     def with_(self, **changes) -> Preset:
         """A copy with some fields changed (e.g. ``preset.with_(dt=0.5)``).
@@ -470,6 +539,26 @@ def imm_ct(dt: float = 1.0) -> Preset:
         estimated_turn_rate=(False, True, False),
         ct_sigma_turn_rate=math.radians(0.5),
         filter_mode_sigma_accel=(0.3, 1.5, 5.0),
+    )
+
+
+def imm_cta(dt: float = 1.0) -> Preset:
+    """:func:`imm_ct` with the along-track acceleration in the turn mode's state: quiet
+    constant velocity, a coordinated turn at the estimated rate Ω *and* estimated
+    along-track acceleration ``a`` (EKF, :mod:`airspace_sim.tracking.along_track`; Ω and
+    ``a`` random walks), manoeuvring constant velocity; the filter's state is
+    ``[x, vx, y, vy, Ω, a]``, ``a`` pinned at 0 in both CV modes. A tracker, not a traffic
+    model (as truth its turn mode flies 2 °/s left at constant speed). Numbers tuned on
+    half the traffic calibration flights (``docs/tracking.md``). Not in :data:`PRESETS`
+    (no name for scenarios): on the other half it is within 1% of ``imm-ct``; the world's
+    tracks are 5-state, so its trackers refuse it.
+    """
+    return replace(
+        imm_ct(dt),
+        name="imm-cta",
+        along_track_acceleration=(False, True, False),
+        filter_mode_sigma_along_track=(0.0, 0.05, 0.0),
+        filter_mode_sigma_accel=(0.3, 1.0, 6.0),
     )
 
 

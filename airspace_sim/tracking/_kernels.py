@@ -129,6 +129,9 @@ def _ct_predict(x0, P0, dt, u, Q, XP, PP, J, FP):
         XP[2, w] = x0[2, w] + c * vx + s * vy + u[2]
         XP[3, w] = si * vx + co * vy + u[3]
         XP[4, w] = x0[4, w] + u[4]
+        for k in range(5, n):
+            # a 6-state model's along-track acceleration: not this mode's, pinned to u (J row 0)
+            XP[k, w] = u[k]
         J[0, 0, w] = 1.0
         J[0, 1, w] = s
         J[0, 3, w] = -c
@@ -144,6 +147,131 @@ def _ct_predict(x0, P0, dt, u, Q, XP, PP, J, FP):
         J[3, 3, w] = co
         J[3, 4, w] = dt * (co * vx - si * vy)
         J[4, 4, w] = 1.0
+    for k in range(n):
+        for l in range(n):
+            for w in range(W):
+                FP[k, l, w] = 0.0
+            for i in range(n):
+                for w in range(W):
+                    FP[k, l, w] += J[k, i, w] * P0[i, l, w]
+    for k in range(n):
+        for l in range(k, n):
+            for w in range(W):
+                PP[k, l, w] = Q[k, l]
+            for i in range(n):
+                for w in range(W):
+                    PP[k, l, w] += FP[k, i, w] * J[l, i, w]
+        for l in range(k):
+            for w in range(W):
+                PP[k, l, w] = PP[l, k, w]
+
+
+#: Below this |ΩT| (rad) the along-track terms b_s, b_c use their series (error ~|ΩT|⁶
+#: relative; the closed forms lose ~ε/|ΩT|³ to cancellation above it).
+_CTA_SMALL = 1e-2
+#: The along-track direction is v / max(|v|, this) (m/s): finite for a track at rest.
+CTA_MIN_SPEED = 1.0
+
+
+@njit(cache=True, error_model="numpy")
+def _cta_terms(omega, T):
+    """``s, c, ∂s/∂Ω, ∂c/∂Ω, cos ΩT, sin ΩT, b_s, b_c, ∂b_s/∂Ω, ∂b_c/∂Ω`` of the
+    coordinated turn with along-track acceleration (:mod:`.along_track`) at turn rate
+    ``omega`` (rad/s) over ``T`` s: ``s, c`` as :func:`.coordinated_turn.ct_terms` (the
+    same formulas, here so that this module's cached kernels call only its own helpers)
+    and ``b_s = ∫₀ᵀ t cos Ωt dt``, ``b_c = ∫₀ᵀ t sin Ωt dt``; exact through Ω = 0 by
+    series."""
+    u = omega * T
+    co = math.cos(u)
+    si = math.sin(u)
+    u2 = u * u
+    if abs(u) < 1e-3:  # coordinated_turn._SMALL
+        s = T * (1.0 - u2 / 6.0)
+        c = T * u * (0.5 - u2 / 24.0)
+        ds = T * T * u * (-1.0 / 3.0 + u2 / 30.0)
+        dc = T * T * (0.5 - u2 / 8.0)
+    else:
+        s = si / omega
+        c = (1.0 - co) / omega
+        ds = (u * co - si) / (omega * omega)
+        dc = (u * si - (1.0 - co)) / (omega * omega)
+    T2 = T * T
+    if abs(u) < _CTA_SMALL:
+        bs = T2 * (0.5 - u2 / 8.0 + u2 * u2 / 144.0)
+        bc = T2 * u * (1.0 / 3.0 - u2 / 30.0 + u2 * u2 / 840.0)
+        dbs = T2 * T * u * (-0.25 + u2 / 36.0 - u2 * u2 / 960.0)
+        dbc = T2 * T * (1.0 / 3.0 - u2 / 10.0 + u2 * u2 / 168.0)
+    else:
+        w2 = omega * omega
+        bs = T * si / omega - (1.0 - co) / w2
+        bc = si / w2 - T * co / omega
+        dbs = T2 * co / omega - 2.0 * T * si / w2 + 2.0 * (1.0 - co) / (w2 * omega)
+        dbc = T2 * si / omega + 2.0 * T * co / w2 - 2.0 * si / (w2 * omega)
+    return s, c, ds, dc, co, si, bs, bc, dbs, dbc
+
+
+@njit(cache=True, error_model="numpy")
+def _cta_predict(x0, P0, dt, u, Q, XP, PP, J, FP):
+    """EKF prediction of the coordinated turn with along-track acceleration
+    (:mod:`.along_track`, state ``[x, vx, y, vy, Ω, a]``) for every lane: x0 (6, W),
+    P0 (6, 6, W) (full) in; XP (6, W) = f(x0) + u, PP (6, 6, W) = J P0 Jᵀ + Q out;
+    J, FP (6, 6, W) work arrays. u (6,), Q (6, 6)."""
+    n = x0.shape[0]
+    W = x0.shape[1]
+    for k in range(n):
+        for l in range(n):
+            for w in range(W):
+                J[k, l, w] = 0.0
+    for w in range(W):
+        vx = x0[1, w]
+        vy = x0[3, w]
+        a = x0[5, w]
+        s, c, ds, dc, co, si, bs, bc, dbs, dbc = _cta_terms(x0[4, w], dt)
+        sp = math.sqrt(vx * vx + vy * vy)
+        # e = v / |v| (the along-track direction) and its Jacobian D = (I − e eᵀ) / |v|
+        if sp > CTA_MIN_SPEED:
+            ex = vx / sp
+            ey = vy / sp
+            d11 = (1.0 - ex * ex) / sp
+            d12 = -ex * ey / sp
+            d22 = (1.0 - ey * ey) / sp
+        else:
+            ex = vx / CTA_MIN_SPEED
+            ey = vy / CTA_MIN_SPEED
+            d11 = 1.0 / CTA_MIN_SPEED
+            d12 = 0.0
+            d22 = 1.0 / CTA_MIN_SPEED
+        # B e and T R e: how far the acceleration a moves the position and the velocity
+        bex = bs * ex - bc * ey
+        bey = bc * ex + bs * ey
+        rex = dt * (co * ex - si * ey)
+        rey = dt * (si * ex + co * ey)
+        XP[0, w] = x0[0, w] + s * vx - c * vy + a * bex + u[0]
+        XP[1, w] = co * vx - si * vy + a * rex + u[1]
+        XP[2, w] = x0[2, w] + c * vx + s * vy + a * bey + u[2]
+        XP[3, w] = si * vx + co * vy + a * rey + u[3]
+        XP[4, w] = x0[4, w] + u[4]
+        XP[5, w] = a + u[5]
+        J[0, 0, w] = 1.0
+        J[0, 1, w] = s + a * (bs * d11 - bc * d12)
+        J[0, 3, w] = -c + a * (bs * d12 - bc * d22)
+        J[0, 4, w] = ds * vx - dc * vy + a * (dbs * ex - dbc * ey)
+        J[0, 5, w] = bex
+        J[1, 1, w] = co + a * dt * (co * d11 - si * d12)
+        J[1, 3, w] = -si + a * dt * (co * d12 - si * d22)
+        J[1, 4, w] = -dt * (si * vx + co * vy) - a * dt * rey
+        J[1, 5, w] = rex
+        J[2, 1, w] = c + a * (bc * d11 + bs * d12)
+        J[2, 2, w] = 1.0
+        J[2, 3, w] = s + a * (bc * d12 + bs * d22)
+        J[2, 4, w] = dc * vx + ds * vy + a * (dbc * ex + dbs * ey)
+        J[2, 5, w] = bey
+        J[3, 1, w] = si + a * dt * (si * d11 + co * d12)
+        J[3, 3, w] = co + a * dt * (si * d12 + co * d22)
+        J[3, 4, w] = dt * (co * vx - si * vy) + a * dt * rex
+        J[3, 5, w] = rey
+        J[4, 4, w] = 1.0
+        J[5, 5, w] = 1.0
     for k in range(n):
         for l in range(n):
             for w in range(W):
@@ -179,9 +307,10 @@ def _make_imm_step(W):
         """One IMM cycle (paper §IV, steps 1–5) for every live slot.
 
         Model: Fr, Fc, Fv (M, K) row, column and value of the non-zeros of each F_j (the
-        first Fnnz[j] of them); Q (M, n, n) symmetric; U (M, n) offsets; ct (M,) bool:
-        estimated-rate coordinated-turn modes (n = 5; EKF, :mod:`.coordinated_turn`; their
-        F is not read), dt their step in seconds; Hr, Hc, Hv (KH,)
+        first Fnnz[j] of them); Q (M, n, n) symmetric; U (M, n) offsets; ct (M,) int:
+        the EKF modes, whose F is not read: 1 the estimated-rate coordinated turn
+        (n = 5 or 6, :mod:`.coordinated_turn`), 2 the coordinated turn with along-track
+        acceleration (n = 6, :mod:`.along_track`); 0 linear; dt their step in seconds; Hr, Hc, Hv (KH,)
         the non-zeros of H (m, n); R (m, m) symmetric positive definite; Pi (M, M)
         row-stochastic; gate_d2 the chi-square gate on d² (``inf``: no gate).
 
@@ -302,7 +431,9 @@ def _make_imm_step(W):
                 # ---- Step 3a: mode-matched prediction x_j = F_j x0j + u_j,
                 #      P_j = F_j P0j F_jᵀ + Q_j, over the non-zeros of F_j; an
                 #      estimated-rate mode: x_j = f(x0j) + u_j, P_j = J P0j Jᵀ + Q_j (EKF)
-                if ct[j]:
+                if ct[j] == 2:
+                    _cta_predict(x0, P0, dt, U[j], Q[j], XP[j], PP[j], J, FP)
+                elif ct[j]:
                     _ct_predict(x0, P0, dt, U[j], Q[j], XP[j], PP[j], J, FP)
                 lin = not ct[j]
                 for k in range(n if lin else 0):

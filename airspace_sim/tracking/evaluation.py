@@ -276,6 +276,7 @@ def known_motion_rmse(
     along_track: bool = False,
     seed: int = 0,
     turn_rate: bool = True,
+    along_track_window_s: float = 0.0,
 ) -> float:
     """Position RMSE (m) of a Kalman filter told the truth's own motion, on the measurements
     :func:`evaluate` draws (same ``seed``, same seconds counted).
@@ -286,7 +287,10 @@ def known_motion_rmse(
     seconds, |ω| < :data:`STRAIGHT_DEG_S`; σ elsewhere) — the filter is then told the regime
     too. With ``along_track`` the truth's along-track acceleration (the derivative of its
     speed) is a known input as well; with ``turn_rate=False`` the rate is not told (ω = 0:
-    the constant-velocity Kalman filter of :func:`evaluate`'s grid). Such a filter has what an IMM over these modes has to
+    the constant-velocity Kalman filter of :func:`evaluate`'s grid). With
+    ``along_track_window_s`` the filter is told only the along-track acceleration's
+    centred moving average over that many seconds (its slow part, what a state that
+    changes slowly could follow). Such a filter has what an IMM over these modes has to
     infer: its RMSE, over the best-tuned CV filter's, is a floor for the IMM / CV ratio of
     any tracker that models the turn but not the speed changes (``docs/tracking.md``).
     """
@@ -309,7 +313,11 @@ def known_motion_rmse(
     if along_track:
         v = np.nan_to_num(X[..., [1, 3]])
         speed = np.hypot(v[..., 0], v[..., 1])
-        a = (np.gradient(speed, period_s, axis=0) / np.maximum(speed, 1.0))[..., None] * v
+        at = np.gradient(speed, period_s, axis=0)
+        if along_track_window_s > 0:
+            width = along_track_window_s / period_s
+            at = np.stack([_moving_average(c, width) for c in at.T], axis=1)
+        a = (at / np.maximum(speed, 1.0))[..., None] * v
     H = models.position_measurement_matrix()[:, :4]
     est = np.full((T, F, 4), np.nan)
     for k in range(2, T):
@@ -345,6 +353,24 @@ def _turn_transition(omega, T: float):
     F[:, 0, 1], F[:, 0, 3], F[:, 2, 1], F[:, 2, 3] = s, -c, c, s
     F[:, 1, 1], F[:, 1, 3], F[:, 3, 1], F[:, 3, 3] = co, -si, si, co
     return F
+
+
+#: Standard deviation (m/s²) of the along-track acceleration a track starts with (a = 0).
+INITIAL_ALONG_TRACK_SD = 1.0
+
+
+def _initial_state(Z, period_s: float, R, n_state: int):
+    """Tracks started from the first two measurements of Z (T, F, 2): x0 (F, n_state),
+    P0 (F, n_state, n_state); Ω = 0 (sd 3 °/s) and, in the 6-state layout, a = 0
+    (sd :data:`INITIAL_ALONG_TRACK_SD`)."""
+    x0, P0 = two_point_initialisation(Z[0], Z[1], period_s, R, 0.0, math.radians(3.0) ** 2)
+    if n_state == models.N_STATE:
+        return x0, P0
+    F = x0.shape[0]
+    x6, P6 = np.zeros((F, n_state)), np.zeros((F, n_state, n_state))
+    x6[:, :5], P6[:, :5, :5] = x0, P0
+    P6[:, 5, 5] = INITIAL_ALONG_TRACK_SD**2
+    return x6, P6
 
 
 def turn_probabilities(imm, known, turning_modes, rate):
@@ -394,7 +420,7 @@ def evaluate(
     T, F, _ = X.shape
     Z = measurements(X, sigma_m, seed)  # NaN after each flight
     R = models.measurement_noise(sigma_m)
-    x0, P0 = two_point_initialisation(Z[0], Z[1], period_s, R, 0.0, math.radians(3.0) ** 2)
+    x0, P0 = _initial_state(Z, period_s, R, p.n_state)
     mu0 = p.mu0()
     ev = _evaluated(X, period_s)
 
@@ -409,7 +435,7 @@ def evaluate(
     gated = 0
     for k in range(2, T):
         imm.step(Z[k])
-        est[k] = imm.x
+        est[k] = imm.x[:, : models.N_STATE]
         p_left[k], p_right[k] = turn_probabilities(imm, known, turning_modes, flag_rate)
         nis[k] = imm.nis
         gated += int(np.count_nonzero(imm.gated & ev[k]))
@@ -422,7 +448,8 @@ def evaluate(
             transitions=models.constant_velocity(period_s)[None],
             process_noise=models.white_noise_acceleration(s, period_s),
             measurement_matrix=models.position_measurement_matrix(),
-            measurement_noise=R, transition_matrix=[[1.0]], x0=x0, P0=P0, mu0=[1.0],
+            measurement_noise=R, transition_matrix=[[1.0]], x0=x0[:, :5], P0=P0[:, :5, :5],
+            mu0=[1.0],
             gate_probability=gate_probability,
         )  # fmt: skip
         e = np.full((T, F, 4), np.nan)

@@ -103,11 +103,17 @@ class IMM:
         :data:`._codegen.AUTO_MAX_PRODUCTS` multiplications, e.g. dense 6-state models);
         the choice made is in the attribute ``kernel``.
     estimated_turn_rate : (M,) bool, optional
-        Modes whose turn rate is the state's own Ω (n = 5, state ``[x, vx, y, vy, Ω]``):
+        Modes whose turn rate is the state's own Ω (n = 5, state ``[x, vx, y, vy, Ω]``, or
+        n = 6 with ``a`` pinned at its offset):
         an EKF coordinated turn (:mod:`.coordinated_turn`), for which ``transitions[j]`` is
         not used; such a model runs the ``"loops"`` kernel.
     dt : float, optional
         The step in seconds; needed with estimated-rate modes.
+    along_track_acceleration : (M,) bool, optional
+        Modes that are a coordinated turn at the state's own Ω *and* along-track
+        acceleration ``a`` (n = 6, state ``[x, vx, y, vy, Ω, a]``; EKF,
+        :mod:`.along_track`); ``transitions[j]`` is not used. Needs ``dt``; runs the
+        ``"loops"`` kernel.
     mode_names : (M,) str, optional
         Names of the modes (attribute ``mode_names``; default ``mode0``, ``mode1``, ...).
         :meth:`from_preset` gives the preset's names and can step with any dt.
@@ -150,6 +156,7 @@ class IMM:
         estimated_turn_rate=None,
         dt=None,
         mode_names=None,
+        along_track_acceleration=None,
         _slots: SlotIMM = None,
     ):
         s = _slots or SlotIMM(
@@ -164,6 +171,7 @@ class IMM:
             estimated_turn_rate=estimated_turn_rate,
             dt=dt,
             mode_names=mode_names,
+            along_track_acceleration=along_track_acceleration,
         )
         x0, P0, mu0 = s._initial(x0, P0, mu0, "")
         self._s = s

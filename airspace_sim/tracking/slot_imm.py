@@ -69,6 +69,7 @@ class SlotIMM:
         estimated_turn_rate=None,
         dt=None,
         mode_names=None,
+        along_track_acceleration=None,
     ):
         F = _array(transitions, "transitions", 3)
         M, n, n2 = F.shape
@@ -107,18 +108,32 @@ class SlotIMM:
             raise UserError(f"IMM gate_probability: must be in (0, 1], got {gate_probability!r}")
         gate_d2 = gate_threshold(p, m)
 
-        ct = np.zeros(M, dtype=bool)
-        if estimated_turn_rate is not None:
-            ct = np.array(estimated_turn_rate, dtype=bool).reshape(-1)
-            if ct.shape != (M,):
-                raise UserError(
-                    f"IMM estimated_turn_rate: expected {M} flags (one per mode), got {ct.size}"
-                )
+        flags = {}
+        for key, value in (("estimated_turn_rate", estimated_turn_rate),
+                           ("along_track_acceleration", along_track_acceleration)):  # fmt: skip
+            flags[key] = np.zeros(M, dtype=bool)
+            if value is not None:
+                flags[key] = np.array(value, dtype=bool).reshape(-1)
+                if flags[key].shape != (M,):
+                    raise UserError(
+                        f"IMM {key}: expected {M} flags (one per mode), got {flags[key].size}"
+                    )
+        est, cta = flags["estimated_turn_rate"], flags["along_track_acceleration"]
+        if cta.any() and n != 6:
+            raise UserError(
+                "IMM along_track_acceleration: needs the state [x, vx, y, vy, Ω, a] (n = 6), "
+                f"got n = {n}"
+            )
+        if est.any() and n not in (5, 6):
+            raise UserError(
+                "IMM estimated_turn_rate: needs the state [x, vx, y, vy, Ω] (n = 5) or "
+                f"[x, vx, y, vy, Ω, a] (n = 6), got n = {n}"
+            )
+        # the kernel's EKF modes: the (M,) bool estimated-rate flags, as they always were
+        # (the same argument types, so the same compiled kernels), or with along-track modes
+        # the (M,) int kinds 0 linear, 1 estimated-rate turn, 2 with along-track a
+        ct = np.where(cta, 2, np.where(est, 1, 0)).astype(np.int64) if cta.any() else est
         if ct.any():
-            if n != 5:
-                raise UserError(
-                    f"IMM estimated_turn_rate: needs the state [x, vx, y, vy, Ω] (n = 5), got n = {n}"
-                )
             try:
                 dt = float(dt)
             except (TypeError, ValueError):
@@ -452,12 +467,26 @@ class SlotIMM:
     def _predict_ct(self, xm, Pm, steps, xs, Ps) -> None:
         """Overwrite the estimated-rate modes' predictions (EKF, :mod:`.coordinated_turn`)
         in xs (R, M, S, n), Ps (R, M, S, n, n) from xm (R, M, n), Pm (R, M, n, n)."""
-        from airspace_sim.tracking import coordinated_turn
+        from airspace_sim.tracking import along_track, coordinated_turn
 
         for j in np.flatnonzero(self._ct):
-            xs[:, j], Ps[:, j] = coordinated_turn.predict(
-                xm[:, j], Pm[:, j], self._Q[j], self._dt, steps
-            )
+            if self._ct[j] == 2:
+                xs[:, j], Ps[:, j] = along_track.predict(
+                    xm[:, j], Pm[:, j], self._Q[j], self._dt, steps, self._U[j]
+                )
+            elif self.n == 5:
+                xs[:, j], Ps[:, j] = coordinated_turn.predict(
+                    xm[:, j], Pm[:, j], self._Q[j], self._dt, steps
+                )
+            else:  # a coordinated turn in the 6-state layout: a pinned at its offset
+                x5, P5 = coordinated_turn.predict(
+                    xm[:, j, :5], Pm[:, j, :5, :5], self._Q[j, :5, :5], self._dt, steps
+                )
+                xs[:, j] = self._U[j]
+                xs[:, j, :, :5] = x5
+                Ps[:, j] = 0.0
+                Ps[:, j, :, :5, :5] = P5
+                Ps[:, j, :, 5, 5] = self._Q[j, 5, 5]
 
     def __repr__(self) -> str:
         return (

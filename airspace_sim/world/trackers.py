@@ -205,6 +205,13 @@ class ImmTracker(parts.Tracker):
 
     def __init__(self, preset: Preset, sigma: float, params=None):
         p = preset.with_(measurement_sigma=max(float(sigma), 1e-3)).filter_model()
+        if p.n_state != 5:
+            # the track table and the avoidance read [x, vx, y, vy, Ω] tracks
+            raise UserError(
+                f"tracker model {p.name!r}: its filter state has {p.n_state} components "
+                "(along-track acceleration); the world's tracks are [x, vx, y, vy, Ω]: use it "
+                "with evaluate-tracker, or pick a 5-state tracker model"
+            )
         self.params = self.Params() if params is None else params
         self.imm = SlotIMM(**p.imm_arguments(), kernel=self.params.kernel)
         self._mu0 = p.mu0()

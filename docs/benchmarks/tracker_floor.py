@@ -9,7 +9,10 @@ filter's σ_a is the best of a grid on the split it runs on (optimistic for the 
 - CV: the best-tuned constant-velocity filter (the denominator of every ratio);
 - rate: told the truth's turn rate at every step, one σ_a;
 - rate + regime: also told straight or not (σ_a quiet on straight seconds, another elsewhere);
-- rate + along-track: also told the truth's along-track acceleration (a known input).
+- rate + along-track: also told the truth's along-track acceleration (a known input);
+- rate + along-track, 30 / 60 s average: told only that acceleration's moving average
+  (its slow part: what an along-track acceleration state that changes slowly, as in the
+  ``imm-cta`` preset, could hope to follow).
 
 An IMM over CV and coordinated-turn modes has to infer what the first two are told: their
 ratios are practical floors of its ratio (``docs/tracking.md``). With ``--preset`` the
@@ -23,9 +26,8 @@ import itertools
 import time
 from pathlib import Path
 
-from tune_tracker import SIGMA_BY_PERIOD, split, truths_of
+from tune_tracker import SIGMA_BY_PERIOD, preset, split, truths_of
 
-from airspace_sim.dynamics import presets
 from airspace_sim.tracking.evaluation import evaluate, known_motion_rmse
 
 GRIDS = {
@@ -35,6 +37,14 @@ GRIDS = {
         dict(sigma_accel=p) for p in itertools.product((0.1, 0.2, 0.3, 0.5), (1.0, 1.5, 2.0, 3.0))
     ],
     "rate + along-track": [dict(sigma_accel=s, along_track=True) for s in (0.2, 0.3, 0.5, 1.0)],
+    "rate + along-track, 30 s average": [
+        dict(sigma_accel=s, along_track=True, along_track_window_s=30.0)
+        for s in (0.3, 0.5, 0.7, 1.0, 1.5, 2.0, 3.0)
+    ],
+    "rate + along-track, 60 s average": [
+        dict(sigma_accel=s, along_track=True, along_track_window_s=60.0)
+        for s in (0.3, 0.5, 0.7, 1.0, 1.5, 2.0, 3.0)
+    ],
 }
 
 
@@ -56,7 +66,7 @@ def main(argv=None) -> None:
         print(f"{a.split} {a.period:g}s {name}: {rmse:.1f} m (sigma_a {kw['sigma_accel']}) "
               f"ratio {rmse / cv:.3f}", flush=True)  # fmt: skip
     for name in a.preset:
-        ev = evaluate(truths, presets.get(name), sigma, a.period)
+        ev = evaluate(truths, preset(name), sigma, a.period)
         print(f"{a.split} {a.period:g}s preset {name}: IMM {ev.pos_imm:.1f} m, its CV "
               f"{ev.pos_cv:.1f} m, ratio {ev.pos_imm / ev.pos_cv:.3f}", flush=True)  # fmt: skip
     print(f"cpu {time.process_time() - t0:.1f} s")
