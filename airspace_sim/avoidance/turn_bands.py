@@ -16,7 +16,15 @@ Two tiers, so that the new test can only choose among headings ``"bands"`` calls
   ``turn_rate`` for ``turn_s`` and then flies straight (the paths of
   :mod:`~airspace_sim.avoidance.turn_paths`: ``p + (R(ωτ) − I)·J⁻¹·v/ω + R(ωτ)·v·(t − τ)``,
   ``τ = min(t, turn_s)``), sampled every ``step_s`` over ``turn_horizon_s`` (default the
-  look-ahead).
+  look-ahead); and, with ``buffer`` > 0, the straight CPA distance is at least
+  ``r_safe·(1 + margin + buffer)`` (resolve wider than detect: a heading chosen on the
+  detection radius leaves the pair's miss distance on that radius, where track noise or a
+  small turn of either aircraft flags it again with 15–25 s to go; ``turn_s = 0`` leaves
+  this test alone); and, with ``as_flown``, clear as flown: the ownship turning at its turn
+  rate until it reaches ψ, then straight (``"bands"``' ``model_turn`` judgement,
+  :func:`~airspace_sim.avoidance.cpa_turning.cpa_min_ratio_turning`, here a preference, not
+  a requirement: with 15–25 s to go, the headings a 3°/s turn sweeps through on its way to
+  ψ are the ones the band search found blocked).
 
 On each side (``ψ ≤ 0``, ``ψ ≥ 0``, ``ψ < 0``: the columns of ``first_clear``) the first
 turn-clear candidate in ``"bands"``' preference order is reported as the side's first clear
@@ -47,9 +55,11 @@ from airspace_sim.avoidance.bands import (
     band_choice,
     bands_from_ratio,
     exact_boundary_candidates,
+    first_clear_from_band,
     preferred_candidates,
 )
 from airspace_sim.avoidance.cpa import cpa_min_ratio, kernel_array
+from airspace_sim.avoidance.cpa_turning import cpa_min_ratio_turning
 from airspace_sim.avoidance.resolvers import BandsResolver, ResolverOutput, _arrays
 from airspace_sim.parts import param
 
@@ -229,6 +239,18 @@ class TurnAwareBandsResolver(BandsResolver):
             le=3600.0,
         )
         step_s: float = param(2.0, unit="s", doc="sample step of the turning paths", gt=0, le=60.0)
+        buffer: float = param(
+            0.0,
+            doc="turn-clear also needs the straight CPA distance ≥ r_safe·(1 + margin + "
+            "buffer) (a wider resolution than detection radius)",
+            ge=0,
+            le=10.0,
+        )
+        as_flown: bool = param(
+            False,
+            doc="turn-clear also needs the candidate clear as flown: the ownship turning "
+            "at its turn rate until ψ is reached, then straight",
+        )
         strong_side_first: bool = param(
             False, doc="a fresh ownship takes the side with a turn-clear heading"
         )
@@ -269,7 +291,24 @@ class TurnAwareBandsResolver(BandsResolver):
         horizon = p.lookahead_s if p.turn_horizon_s is None else p.turn_horizon_s
         turn = np.full((n, 3), -1, dtype=np.int64)
         rows = np.flatnonzero(conflict)  # the choice of a clear ownship is ψ = 0 either way
-        if rows.size and r.shape[1] > 0:
+        # the wide straight test: one common radius, so the ratio scales with it
+        wide = band & (ratio >= (1.0 + p.margin + p.buffer) / (1.0 + p.margin) - CLEAR_TOLERANCE)
+        if p.as_flown and rows.size and r.shape[1] > 0:
+            rate_rows = np.broadcast_to(np.asarray(rate, dtype=float), (n,))[rows]
+            flown = cpa_min_ratio_turning(
+                vo[rows],
+                r[rows],
+                v[rows],
+                valid[rows],
+                np.where(usable[rows], cand[rows], 0.0),
+                radius,
+                p.lookahead_s,
+                rate_rows,
+            )
+            wide[rows] &= flown >= 1.0 - CLEAR_TOLERANCE
+        if p.turn_s == 0.0 or r.shape[1] == 0:
+            turn[rows] = first_clear_from_band(cand[rows], wide[rows])
+        elif rows.size:
             rate_rows = np.broadcast_to(np.asarray(rate, dtype=float), (n,))[rows]
             turn[rows] = first_turn_clear(
                 vo[rows],
@@ -277,7 +316,7 @@ class TurnAwareBandsResolver(BandsResolver):
                 v[rows],
                 valid[rows],
                 cand[rows],
-                band[rows],
+                wide[rows],
                 p.r_safe * (1.0 + p.turn_margin),
                 rate_rows,
                 p.turn_s,
