@@ -220,7 +220,6 @@ RANGES: dict[str, Callable[[Any], str | None]] = {
     "ResolverSpec.confirm_s": _range(0, MAX_LOOKAHEAD_S, unit="s"),
     "ResolverSpec.resume_margin": _range(0, 100.0),
     "ResolverSpec.resume_decay_s": _range(0, MAX_TIME_S, lo_open=True, unit="s"),
-    "ResolverSpec.resume_floor": _range(0, 100.0),
     "ResolverSpec.resume_rule": _one_of(RESUME_RULES),
     "ResolverSpec.resume_turn_s": _range(0, MAX_LOOKAHEAD_S, unit="s"),
     "ResolverSpec.probability_horizon_s": _range(0, MAX_LOOKAHEAD_S, lo_open=True, unit="s"),

@@ -80,9 +80,6 @@ class ResolverSpec:
     #: never); random traffic needs it, or aircraft wait for a clearance that never opens
     #: (docs/tuning.md)
     resume_decay_s: float | None = None
-    #: fraction of r_safe below which resume_decay_s does not shrink resume_margin (0: down
-    #: to the resolver's clear radius; docs/resolvers.md, session of 2026-12-02, third part)
-    resume_floor: float = 0.0
     #: how a clear ownship's turn back is judged against r_safe·(1 + margin + resume_margin)
     #: (world CDA policy, docs/resolvers.md "Resume rules"): "hold" (the turn clears that
     #: radius, else the heading is held), "partial" (the largest of 1, 1/2, 1/4 of the turn
