@@ -91,3 +91,41 @@ def test_closed_form_stationary_obstacle():
     assert ob.heading_change[0] == pytest.approx(-math.asin(radius / dist), abs=1e-12)
     step = math.radians(1.0)
     assert of.heading_change[0] == pytest.approx(-math.ceil(a_f / step) * step, abs=1e-12)
+
+
+def test_fresh_sides_only_is_model_turn_but_for_a_fresh_ownships_open_sides():
+    """fresh_sides_only: a committed ownship gets exactly "bands"' model_turn search; a
+    fresh one sees "bands"' open sides, each with its first heading clear as flown, else
+    its best as-flown one."""
+    vo, r, v, valid, mx = _random_scene(3)
+    n = vo.shape[0]
+    rate = np.full(n, RATE)
+    params = dict(lookahead_s=45.0)
+    flown = FlownBandsResolver(FlownBandsResolver.Params(fresh_sides_only=True, **params))
+    model = BandsResolver(BandsResolver.Params(model_turn=True, **params))
+    kept = np.where(np.arange(n) % 2 == 0, -1.0, 1.0)
+    a = flown.resolve(vo, r, v, valid, mx, turn_rate=rate, committed_side=kept)
+    b = model.resolve(vo, r, v, valid, mx, turn_rate=rate, committed_side=kept)
+    c = a.conflict
+    np.testing.assert_array_equal(a.heading_change[c], b.heading_change[c])
+    np.testing.assert_array_equal(a.first_clear[c], b.first_clear[c])
+    np.testing.assert_array_equal(a.best_blocked[c], b.best_blocked[c])
+    fresh = np.zeros(n)
+    a = flown.resolve(vo, r, v, valid, mx, turn_rate=rate, committed_side=fresh)
+    at_once = BandsResolver(BandsResolver.Params(**params)).resolve(
+        vo, r, v, valid, mx, turn_rate=rate, committed_side=fresh
+    )
+    b = model.resolve(vo, r, v, valid, mx, turn_rate=rate, committed_side=fresh)
+    c = a.conflict
+    np.testing.assert_array_equal(
+        a.first_clear[c] >= 0, (at_once.first_clear[c] >= 0) | (b.first_clear[c] >= 0)
+    )
+    lifted = (a.first_clear[c] != b.first_clear[c]).any(axis=1)
+    assert lifted.any()
+    cand, ratio = a.candidates[c], a.min_ratio[c]
+    for col, mask in enumerate((cand <= 0, cand >= 0, cand < 0)):
+        idx = a.first_clear[c, col]
+        moved = idx != b.first_clear[c, col]
+        top = np.max(np.where(mask & ~np.isnan(cand), ratio, -np.inf), axis=1)
+        np.testing.assert_array_equal(ratio[moved, idx[moved]], top[moved])
+        assert (ratio[moved, idx[moved]] < 1.0).all()

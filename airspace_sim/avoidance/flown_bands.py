@@ -21,13 +21,20 @@ two turn into each other (ring of 64, seed 0: 8 losses, all such pairs).
   side's first clear candidate.
 
 On a side with no clear candidate the best blocked one is the candidate of largest as-flown
-ratio (``model_turn``'s). Detection is ``"bands"``' straight CPA test at the current heading
+ratio (``model_turn``'s).
+
+With ``fresh_sides_only`` everything is ``model_turn``'s (first clear as flown, else best as
+flown) except one thing: for an ownship not yet committed to a side, a side that is open at
+once but has no heading clear as flown reports its best as-flown heading as its first clear
+one, so the policy commits the side ``"bands"`` would (:func:`fresh_flown_sides`); once
+committed, the ownship flies ``model_turn``'s heading on that side. Detection is ``"bands"``' straight CPA test at the current heading
 (the world's prefilter holds). Distances m, velocities m/s, times s, angles rad CCW positive.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -35,12 +42,14 @@ from airspace_sim import registry
 from airspace_sim.avoidance.bands import (
     CLEAR_TOLERANCE,
     band_choice,
+    bands_from_ratio,
     exact_boundary_candidates,
     preferred_candidates,
 )
 from airspace_sim.avoidance.cpa import cpa_min_ratio
 from airspace_sim.avoidance.cpa_turning import cpa_min_ratio_turning
 from airspace_sim.avoidance.resolvers import BandsResolver, ResolverOutput, _arrays
+from airspace_sim.parts import param
 
 #: rad/s: the ownship's turn rate when the caller gives none (the shipped 3°/s limit)
 DEFAULT_TURN_RATE = math.radians(3.0)
@@ -73,9 +82,40 @@ def flown_sides(candidates, clear, flown, wanted):
     return first, best
 
 
+def fresh_flown_sides(candidates, clear, flown, wanted, committed_side=None):
+    """``(first_clear (N, 3), best_blocked (N, 2))`` judged as flown (``"bands"``'
+    ``model_turn``: the first candidate clear as flown, else the best as-flown one), except
+    that for an ownship with no committed side (``committed_side`` (N,) 0, or None: all) a
+    side that is open at once but has no heading clear as flown reports its best as-flown
+    candidate as its first clear one, so the CDA policy commits the side ``"bands"`` would.
+    Arguments as in :func:`flown_sides`."""
+    usable = ~np.isnan(candidates)
+    _, first, best = bands_from_ratio(candidates, flown, usable, wanted)
+    n = candidates.shape[0]
+    fresh = np.ones(n, dtype=bool)
+    if committed_side is not None:
+        fresh = np.broadcast_to(np.asarray(committed_side, dtype=float), (n,)) == 0
+    for col, mask in enumerate((candidates <= 0, candidates >= 0, candidates < 0)):
+        side = mask & usable
+        top = np.argmax(np.where(side, flown, -np.inf), axis=1)
+        lift = fresh & (first[:, col] < 0) & (clear & mask).any(axis=1)
+        first[:, col] = np.where(lift, top, first[:, col])
+        if col < 2:
+            best[:, col] = np.where(lift, -1, best[:, col])
+    return first, best
+
+
 @registry.register("resolver", "bands-flown")
 class FlownBandsResolver(BandsResolver):
     """``"bands"``' open sides, the heading on a side judged as flown (module docstring)."""
+
+    @dataclass(frozen=True)
+    class Params(BandsResolver.Params):
+        fresh_sides_only: bool = param(
+            False,
+            doc="judge everything as flown (model_turn) but which sides are open to an "
+            "ownship not yet committed to one",
+        )
 
     def resolve(
         self,
@@ -132,7 +172,10 @@ class FlownBandsResolver(BandsResolver):
         if committed_side is not None:
             side = np.broadcast_to(np.asarray(committed_side, dtype=float), (n,))
             wanted = np.stack([side <= 0, side >= 0], axis=1)
-        first, best = flown_sides(cand, clear, flown, wanted)
+        if self.params.fresh_sides_only:
+            first, best = fresh_flown_sides(cand, clear, flown, wanted, committed_side)
+        else:
+            first, best = flown_sides(cand, clear, flown, wanted)
         idx = np.arange(n)
         choice = band_choice(
             first, best, lambda i: np.where(i >= 0, flown[idx, np.maximum(i, 0)], -np.inf)
