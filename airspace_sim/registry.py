@@ -141,6 +141,8 @@ def _import_builtins() -> None:
         "airspace_sim.avoidance.resolvers",
         "airspace_sim.avoidance.roundabout",
         "airspace_sim.avoidance.mode_bands",
+        "airspace_sim.avoidance.turn_bands",
+        "airspace_sim.avoidance.flown_bands",
         "airspace_sim.world.autopilots",
         "airspace_sim.recorded.autopilot",
         "airspace_sim.world.sensors",

@@ -1,0 +1,191 @@
+"""Band search with the sides judged at once and the heading on a side judged as flown.
+
+``"bands"`` judges a candidate ψ as if the heading changed at once. In dense random traffic
+its losses come 15–35 s after detection (``docs/resolvers.md``), when a 3°/s turn to ψ takes
+a good part of the time left and sweeps through headings the search found blocked; judging
+candidates as flown (``"bands"``' ``model_turn``: turning at the turn rate until ψ is
+reached, then straight, :func:`~airspace_sim.avoidance.cpa_turning.cpa_min_ratio_turning`)
+gave fewer losses and shorter paths there, but on the converging ring it lets neighbours
+take opposite sides: an ownship whose right side has no heading clear *as flown* commits
+left under the CDA policy's right-of-way preference, its neighbour commits right, and the
+two turn into each other (ring of 64, seed 0: 8 losses, all such pairs).
+
+``"bands-flown"`` separates the two questions:
+
+- *which sides are open* is ``"bands"``' answer: a side (``ψ ≤ 0``, ``ψ ≥ 0``, ``ψ < 0``: the
+  columns of ``first_clear``) is open when some candidate on it is clear at once, so the
+  CDA policy commits the same sides as under ``"bands"`` for the same picture;
+- *which heading on an open side* is judged as flown: the first candidate in ``"bands"``'
+  preference order that is clear at once and as flown, else the one of largest as-flown
+  minimum CPA ratio among the side's clear-at-once candidates; it is reported as that
+  side's first clear candidate.
+
+On a side with no clear candidate the best blocked one is the candidate of largest as-flown
+ratio (``model_turn``'s).
+
+With ``fresh_sides_only`` everything is ``model_turn``'s (first clear as flown, else best as
+flown) except one thing: for an ownship not yet committed to a side, a side that is open at
+once but has no heading clear as flown reports its best as-flown heading as its first clear
+one, so the policy commits the side ``"bands"`` would (:func:`fresh_flown_sides`); once
+committed, the ownship flies ``model_turn``'s heading on that side. Detection is ``"bands"``' straight CPA test at the current heading
+(the world's prefilter holds). Distances m, velocities m/s, times s, angles rad CCW positive.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from airspace_sim import registry
+from airspace_sim.avoidance.bands import (
+    CLEAR_TOLERANCE,
+    band_choice,
+    bands_from_ratio,
+    exact_boundary_candidates,
+    preferred_candidates,
+)
+from airspace_sim.avoidance.cpa import cpa_min_ratio
+from airspace_sim.avoidance.cpa_turning import cpa_min_ratio_turning
+from airspace_sim.avoidance.resolvers import BandsResolver, ResolverOutput, _arrays
+from airspace_sim.parts import param
+
+#: rad/s: the ownship's turn rate when the caller gives none (the shipped 3°/s limit)
+DEFAULT_TURN_RATE = math.radians(3.0)
+
+
+def flown_sides(candidates, clear, flown, wanted):
+    """``(first_clear (N, 3), best_blocked (N, 2))`` of the module docstring's choice.
+
+    candidates (N, C) rad in preference order (NaN: unused); clear (N, C) bool, clear at
+    once; flown (N, C) as-flown minimum CPA ratio (−inf where unused); wanted (N, 2) bool,
+    the sides (ψ ≤ 0, ψ ≥ 0) whose best blocked candidate is asked for. Indices into
+    ``candidates``, −1: none.
+    """
+    n = candidates.shape[0]
+    usable = ~np.isnan(candidates)
+    good = clear & (flown >= 1.0 - CLEAR_TOLERANCE)
+    first = np.full((n, 3), -1, dtype=np.int64)
+    best = np.full((n, 2), -1, dtype=np.int64)
+    for col, mask in enumerate((candidates <= 0, candidates >= 0, candidates < 0)):
+        open_ = (clear & mask).any(axis=1)
+        fine = good & mask
+        top = np.argmax(np.where(clear & mask, flown, -np.inf), axis=1)
+        first[:, col] = np.where(
+            fine.any(axis=1), np.argmax(fine, axis=1), np.where(open_, top, -1)
+        )
+        if col < 2:
+            side = mask & usable
+            blocked = ~open_ & side.any(axis=1) & wanted[:, col]
+            best[:, col] = np.where(blocked, np.argmax(np.where(side, flown, -np.inf), axis=1), -1)
+    return first, best
+
+
+def fresh_flown_sides(candidates, clear, flown, wanted, committed_side=None):
+    """``(first_clear (N, 3), best_blocked (N, 2))`` judged as flown (``"bands"``'
+    ``model_turn``: the first candidate clear as flown, else the best as-flown one), except
+    that for an ownship with no committed side (``committed_side`` (N,) 0, or None: all) a
+    side that is open at once but has no heading clear as flown reports its best as-flown
+    candidate as its first clear one, so the CDA policy commits the side ``"bands"`` would.
+    Arguments as in :func:`flown_sides`."""
+    usable = ~np.isnan(candidates)
+    _, first, best = bands_from_ratio(candidates, flown, usable, wanted)
+    n = candidates.shape[0]
+    fresh = np.ones(n, dtype=bool)
+    if committed_side is not None:
+        fresh = np.broadcast_to(np.asarray(committed_side, dtype=float), (n,)) == 0
+    for col, mask in enumerate((candidates <= 0, candidates >= 0, candidates < 0)):
+        side = mask & usable
+        top = np.argmax(np.where(side, flown, -np.inf), axis=1)
+        lift = fresh & (first[:, col] < 0) & (clear & mask).any(axis=1)
+        first[:, col] = np.where(lift, top, first[:, col])
+        if col < 2:
+            best[:, col] = np.where(lift, -1, best[:, col])
+    return first, best
+
+
+@registry.register("resolver", "bands-flown")
+class FlownBandsResolver(BandsResolver):
+    """``"bands"``' open sides, the heading on a side judged as flown (module docstring)."""
+
+    @dataclass(frozen=True)
+    class Params(BandsResolver.Params):
+        fresh_sides_only: bool = param(
+            False,
+            doc="judge everything as flown (model_turn) but which sides are open to an "
+            "ownship not yet committed to one",
+        )
+
+    def resolve(
+        self,
+        own_velocity,
+        rel_position,
+        rel_velocity,
+        valid,
+        max_heading_change,
+        *,
+        mode_predictions=None,
+        turn_rate=None,
+        committed_side=None,
+    ):
+        p = self.params
+        vo, r, v, valid, mx = _arrays(
+            own_velocity, rel_position, rel_velocity, valid, max_heading_change
+        )
+        n = vo.shape[0]
+        radius = p.r_safe * (1.0 + p.margin)
+        extra = None
+        if p.exact_candidates and r.shape[1] > 0:
+            extra = exact_boundary_candidates(vo, r, v, valid, radius, p.lookahead_s)
+        cand = preferred_candidates(mx, p.resolution, extra, p.left_penalty)
+        usable = ~np.isnan(cand)
+        safe = np.where(usable, cand, 0.0)
+        ratio = np.where(
+            usable, cpa_min_ratio(vo, r, v, valid, safe, radius, p.lookahead_s), -np.inf
+        )
+        ratio0 = cpa_min_ratio(vo, r, v, valid, np.zeros((n, 1)), radius, p.lookahead_s)[:, 0]
+        conflict = ~(ratio0 >= 1.0 - CLEAR_TOLERANCE)
+        clear = usable & (ratio >= 1.0 - CLEAR_TOLERANCE)
+        # as flown only where the choice matters (a clear ownship keeps ψ = 0): the at-once
+        # ratio elsewhere
+        flown = ratio.copy()
+        rows = np.flatnonzero(conflict)
+        if rows.size and r.shape[1] > 0:
+            rate = DEFAULT_TURN_RATE if turn_rate is None else turn_rate
+            rate_rows = np.broadcast_to(np.asarray(rate, dtype=float), (n,))[rows]
+            flown[rows] = np.where(
+                usable[rows],
+                cpa_min_ratio_turning(
+                    vo[rows],
+                    r[rows],
+                    v[rows],
+                    valid[rows],
+                    safe[rows],
+                    radius,
+                    p.lookahead_s,
+                    rate_rows,
+                ),
+                -np.inf,
+            )
+        wanted = np.ones((n, 2), dtype=bool)
+        if committed_side is not None:
+            side = np.broadcast_to(np.asarray(committed_side, dtype=float), (n,))
+            wanted = np.stack([side <= 0, side >= 0], axis=1)
+        if self.params.fresh_sides_only:
+            first, best = fresh_flown_sides(cand, clear, flown, wanted, committed_side)
+        else:
+            first, best = flown_sides(cand, clear, flown, wanted)
+        idx = np.arange(n)
+        choice = band_choice(
+            first, best, lambda i: np.where(i >= 0, flown[idx, np.maximum(i, 0)], -np.inf)
+        )
+        return ResolverOutput(
+            cand[idx, choice],
+            conflict,
+            cand,
+            clear,
+            min_ratio=flown,
+            first_clear=first,
+            best_blocked=best,
+        )

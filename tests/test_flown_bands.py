@@ -1,0 +1,131 @@
+"""The as-flown band search ("bands-flown", avoidance/flown_bands.py): the open sides are
+"bands"', the heading on a side is the first clear at once and as flown, and a scene whose
+choice follows from the closed-form as-flown miss distance."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+from airspace_sim import registry
+from airspace_sim.avoidance.cpa_turning import cpa_min_ratio_turning
+from airspace_sim.avoidance.flown_bands import FlownBandsResolver
+from airspace_sim.avoidance.resolvers import BandsResolver
+
+RATE = math.radians(3.0)
+
+
+def _random_scene(seed, n=120, k=5):
+    rng = np.random.default_rng(seed)
+    vo = rng.normal(size=(n, 2))
+    vo *= rng.uniform(180, 260, (n, 1)) / np.linalg.norm(vo, axis=1, keepdims=True)
+    r = rng.uniform(-15000, 15000, (n, k, 2))
+    vi = rng.normal(size=(n, k, 2))
+    vi *= rng.uniform(180, 260, (n, k, 1)) / np.linalg.norm(vi, axis=-1, keepdims=True)
+    valid = (rng.random((n, k)) < 0.85) & (np.hypot(r[..., 0], r[..., 1]) > 3300.0)
+    return vo, r, vi - vo[:, None], valid, np.full(n, math.pi / 2)
+
+
+def test_registered():
+    assert registry.get("resolver", "bands-flown") is FlownBandsResolver
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_sides_are_bands_and_heading_is_first_clear_as_flown(seed):
+    vo, r, v, valid, mx = _random_scene(seed)
+    rate = np.full(vo.shape[0], RATE)
+    ob = BandsResolver(BandsResolver.Params(lookahead_s=45.0)).resolve(
+        vo, r, v, valid, mx, turn_rate=rate
+    )
+    of = FlownBandsResolver(FlownBandsResolver.Params(lookahead_s=45.0)).resolve(
+        vo, r, v, valid, mx, turn_rate=rate
+    )
+    np.testing.assert_array_equal(of.conflict, ob.conflict)
+    np.testing.assert_array_equal(of.first_clear >= 0, ob.first_clear >= 0)
+    rows = np.flatnonzero(of.conflict)
+    cand = of.candidates[rows]
+    flown = cpa_min_ratio_turning(
+        vo[rows], r[rows], v[rows], valid[rows], np.nan_to_num(cand), 3300.0, 45.0, rate[rows]
+    )
+    good = of.band[rows] & (flown >= 1.0 - 1e-9)
+    checked = 0
+    for col, mask in enumerate((cand <= 0, cand >= 0, cand < 0)):
+        idx = of.first_clear[rows, col]
+        has = (good & mask).any(axis=1)
+        np.testing.assert_array_equal(idx[has], np.argmax((good & mask)[has], axis=1))
+        # an open side without a heading clear as flown: its best as-flown clear heading
+        weak = ~has & (idx >= 0)
+        top = np.max(np.where(of.band[rows] & mask, flown, -np.inf), axis=1)
+        np.testing.assert_allclose(flown[weak, idx[weak]], top[weak])
+        checked += int(has.sum() + weak.sum())
+    assert checked > 0
+    assert np.isin(of.heading_change[rows], cand).all()
+
+
+def test_closed_form_stationary_obstacle():
+    """Ownship east at 230 m/s, a stationary intruder 12 km dead ahead, r_safe·1.1 = 3.3 km.
+    At once, the miss is D·|sin ψ| ("bands": ψ = −asin(R0/D), ties go right). As flown,
+    a right turn by a at ω = 3°/s ends at X(a) = ρ(sin a, −(1 − cos a)), ρ = v/ω, heading
+    −a, and the miss is the distance from the obstacle to that line (its closest point
+    ahead of X; the arc stays farther): ``"bands-flown"`` takes the first candidate beyond
+    the root a_f of miss(a) = R0, the next 1° grid step."""
+    speed, dist, radius = 230.0, 12000.0, 3300.0
+    rho = speed / RATE
+
+    def miss(a):
+        x = np.array([rho * math.sin(a), -rho * (1.0 - math.cos(a))])
+        u = np.array([math.cos(a), -math.sin(a)])
+        d = np.array([dist, 0.0]) - x
+        assert d @ u > 0
+        return abs(d[0] * u[1] - d[1] * u[0])
+
+    a_f = brentq(lambda a: miss(a) - radius, 0.01, 1.0)
+    assert math.asin(radius / dist) < a_f < math.asin(radius / dist) + math.radians(1.5)
+    vo = np.array([[speed, 0.0]])
+    r = np.array([[[dist, 0.0]]])
+    args = (vo, r, -vo[:, None], np.ones((1, 1), bool), np.array([math.pi / 2]))
+    rate = np.array([RATE])
+    ob = BandsResolver(BandsResolver.Params()).resolve(*args, turn_rate=rate)
+    of = FlownBandsResolver(FlownBandsResolver.Params()).resolve(*args, turn_rate=rate)
+    assert ob.heading_change[0] == pytest.approx(-math.asin(radius / dist), abs=1e-12)
+    step = math.radians(1.0)
+    assert of.heading_change[0] == pytest.approx(-math.ceil(a_f / step) * step, abs=1e-12)
+
+
+def test_fresh_sides_only_is_model_turn_but_for_a_fresh_ownships_open_sides():
+    """fresh_sides_only: a committed ownship gets exactly "bands"' model_turn search; a
+    fresh one sees "bands"' open sides, each with its first heading clear as flown, else
+    its best as-flown one."""
+    vo, r, v, valid, mx = _random_scene(3)
+    n = vo.shape[0]
+    rate = np.full(n, RATE)
+    params = dict(lookahead_s=45.0)
+    flown = FlownBandsResolver(FlownBandsResolver.Params(fresh_sides_only=True, **params))
+    model = BandsResolver(BandsResolver.Params(model_turn=True, **params))
+    kept = np.where(np.arange(n) % 2 == 0, -1.0, 1.0)
+    a = flown.resolve(vo, r, v, valid, mx, turn_rate=rate, committed_side=kept)
+    b = model.resolve(vo, r, v, valid, mx, turn_rate=rate, committed_side=kept)
+    c = a.conflict
+    np.testing.assert_array_equal(a.heading_change[c], b.heading_change[c])
+    np.testing.assert_array_equal(a.first_clear[c], b.first_clear[c])
+    np.testing.assert_array_equal(a.best_blocked[c], b.best_blocked[c])
+    fresh = np.zeros(n)
+    a = flown.resolve(vo, r, v, valid, mx, turn_rate=rate, committed_side=fresh)
+    at_once = BandsResolver(BandsResolver.Params(**params)).resolve(
+        vo, r, v, valid, mx, turn_rate=rate, committed_side=fresh
+    )
+    b = model.resolve(vo, r, v, valid, mx, turn_rate=rate, committed_side=fresh)
+    c = a.conflict
+    np.testing.assert_array_equal(
+        a.first_clear[c] >= 0, (at_once.first_clear[c] >= 0) | (b.first_clear[c] >= 0)
+    )
+    lifted = (a.first_clear[c] != b.first_clear[c]).any(axis=1)
+    assert lifted.any()
+    cand, ratio = a.candidates[c], a.min_ratio[c]
+    for col, mask in enumerate((cand <= 0, cand >= 0, cand < 0)):
+        idx = a.first_clear[c, col]
+        moved = idx != b.first_clear[c, col]
+        top = np.max(np.where(mask & ~np.isnan(cand), ratio, -np.inf), axis=1)
+        np.testing.assert_array_equal(ratio[moved, idx[moved]], top[moved])
+        assert (ratio[moved, idx[moved]] < 1.0).all()
