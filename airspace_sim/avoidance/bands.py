@@ -90,6 +90,39 @@ def first_clear_from_band(candidates, band):
     return out
 
 
+def wanted_sides(committed_side, n):
+    """(n, 2) bool: the sides (ψ ≤ 0, ψ ≥ 0) whose best blocked candidate is wanted, all
+    of them without a ``committed_side`` ((n,), −1 right, +1 left, 0 none)."""
+    if committed_side is None:
+        return np.ones((n, 2), dtype=bool)
+    side = np.broadcast_to(np.asarray(committed_side, dtype=float), (n,))
+    return np.stack([side <= 0, side >= 0], axis=1)
+
+
+def at_once_ratios(own_velocity, rel_position, rel_velocity, valid, max_heading_change, params):
+    """``"bands"``' candidates judged at once, for resolvers that judge them further.
+
+    Arrays as :func:`band_search`'s, already shaped ((N, 2), (N, K, 2), (N, K, 2), (N, K),
+    (N,)); ``params`` a ``"bands"`` :class:`~airspace_sim.avoidance.resolvers.BandsResolver`
+    ``Params``. Returns ``(radius, candidates, usable, ratio, conflict)``: the padded radius
+    (m), the (N, C) candidates in preference order (NaN padding), where they are not
+    padding, their minimum CPA ratio if flown at once (``-inf`` on padding) and the (N,)
+    conflict flags of the straight test at ψ = 0.
+    """
+    vo, r, v, p = own_velocity, rel_position, rel_velocity, params
+    radius = p.r_safe * (1.0 + p.margin)
+    extra = None
+    if p.exact_candidates and r.shape[1] > 0:
+        extra = exact_boundary_candidates(vo, r, v, valid, radius, p.lookahead_s)
+    cand = preferred_candidates(max_heading_change, p.resolution, extra, p.left_penalty)
+    usable = ~np.isnan(cand)
+    ratio = cpa_min_ratio(vo, r, v, valid, np.where(usable, cand, 0.0), radius, p.lookahead_s)
+    ratio = np.where(usable, ratio, -np.inf)
+    n = vo.shape[0]
+    ratio0 = cpa_min_ratio(vo, r, v, valid, np.zeros((n, 1)), radius, p.lookahead_s)[:, 0]
+    return radius, cand, usable, ratio, ~(ratio0 >= 1.0 - CLEAR_TOLERANCE)
+
+
 def bands_from_ratio(candidates, ratio, usable, wanted):
     """``(band (N, C), first_clear (N, 3), best_blocked (N, 2))`` of :class:`BandResult`
     from every candidate's ``ratio`` (N, C) (``-inf`` where not ``usable``); ``wanted``
@@ -280,10 +313,7 @@ def band_search(
     valid = np.asarray(valid, dtype=bool).reshape(n, -1)
     mx = np.broadcast_to(np.asarray(max_heading_change, dtype=float), (n,))
     radius = np.asarray(r_safe, dtype=float) * (1.0 + margin)
-    wanted = np.ones((n, 2), dtype=bool)  # (n, 2): best_blocked of (ψ ≤ 0, ψ ≥ 0) wanted
-    if committed_side is not None:
-        side = np.broadcast_to(np.asarray(committed_side, dtype=float), (n,))
-        wanted = np.stack([side <= 0, side >= 0], axis=1)
+    wanted = wanted_sides(committed_side, n)
     grid = _grid(mx, resolution)
     # the fast path's kernel needs an increasing grid (always so for a resolution > 0)
     fast = not full and turn_rate is None and bool(np.all(np.diff(grid) > 0))

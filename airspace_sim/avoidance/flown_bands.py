@@ -41,12 +41,11 @@ import numpy as np
 from airspace_sim import registry
 from airspace_sim.avoidance.bands import (
     CLEAR_TOLERANCE,
+    at_once_ratios,
     band_choice,
     bands_from_ratio,
-    exact_boundary_candidates,
-    preferred_candidates,
+    wanted_sides,
 )
-from airspace_sim.avoidance.cpa import cpa_min_ratio
 from airspace_sim.avoidance.cpa_turning import cpa_min_ratio_turning
 from airspace_sim.avoidance.resolvers import BandsResolver, ResolverOutput, _arrays
 from airspace_sim.parts import param
@@ -134,18 +133,8 @@ class FlownBandsResolver(BandsResolver):
             own_velocity, rel_position, rel_velocity, valid, max_heading_change
         )
         n = vo.shape[0]
-        radius = p.r_safe * (1.0 + p.margin)
-        extra = None
-        if p.exact_candidates and r.shape[1] > 0:
-            extra = exact_boundary_candidates(vo, r, v, valid, radius, p.lookahead_s)
-        cand = preferred_candidates(mx, p.resolution, extra, p.left_penalty)
-        usable = ~np.isnan(cand)
+        radius, cand, usable, ratio, conflict = at_once_ratios(vo, r, v, valid, mx, p)
         safe = np.where(usable, cand, 0.0)
-        ratio = np.where(
-            usable, cpa_min_ratio(vo, r, v, valid, safe, radius, p.lookahead_s), -np.inf
-        )
-        ratio0 = cpa_min_ratio(vo, r, v, valid, np.zeros((n, 1)), radius, p.lookahead_s)[:, 0]
-        conflict = ~(ratio0 >= 1.0 - CLEAR_TOLERANCE)
         clear = usable & (ratio >= 1.0 - CLEAR_TOLERANCE)
         # as flown only where the choice matters (a clear ownship keeps ψ = 0): the at-once
         # ratio elsewhere
@@ -168,10 +157,7 @@ class FlownBandsResolver(BandsResolver):
                 ),
                 -np.inf,
             )
-        wanted = np.ones((n, 2), dtype=bool)
-        if committed_side is not None:
-            side = np.broadcast_to(np.asarray(committed_side, dtype=float), (n,))
-            wanted = np.stack([side <= 0, side >= 0], axis=1)
+        wanted = wanted_sides(committed_side, n)
         if self.params.fresh_sides_only:
             first, best = fresh_flown_sides(cand, clear, flown, wanted, committed_side)
         else:

@@ -52,13 +52,13 @@ from airspace_sim import registry
 from airspace_sim.avoidance.bands import (
     CLEAR_TOLERANCE,
     STRICT_RIGHT,
+    at_once_ratios,
     band_choice,
     bands_from_ratio,
-    exact_boundary_candidates,
     first_clear_from_band,
-    preferred_candidates,
+    wanted_sides,
 )
-from airspace_sim.avoidance.cpa import cpa_min_ratio, kernel_array
+from airspace_sim.avoidance.cpa import kernel_array
 from airspace_sim.avoidance.cpa_turning import cpa_min_ratio_turning
 from airspace_sim.avoidance.resolvers import BandsResolver, ResolverOutput, _arrays
 from airspace_sim.parts import param
@@ -272,21 +272,8 @@ class TurnAwareBandsResolver(BandsResolver):
             own_velocity, rel_position, rel_velocity, valid, max_heading_change
         )
         n = vo.shape[0]
-        radius = p.r_safe * (1.0 + p.margin)
-        extra = None
-        if p.exact_candidates and r.shape[1] > 0:
-            extra = exact_boundary_candidates(vo, r, v, valid, radius, p.lookahead_s)
-        cand = preferred_candidates(mx, p.resolution, extra, p.left_penalty)
-        usable = ~np.isnan(cand)
-        ratio = cpa_min_ratio(vo, r, v, valid, np.where(usable, cand, 0.0), radius, p.lookahead_s)
-        ratio = np.where(usable, ratio, -np.inf)
-        wanted = np.ones((n, 2), dtype=bool)
-        if committed_side is not None:
-            side = np.broadcast_to(np.asarray(committed_side, dtype=float), (n,))
-            wanted = np.stack([side <= 0, side >= 0], axis=1)
-        band, first, best = bands_from_ratio(cand, ratio, usable, wanted)
-        ratio0 = cpa_min_ratio(vo, r, v, valid, np.zeros((n, 1)), radius, p.lookahead_s)[:, 0]
-        conflict = ~(ratio0 >= 1.0 - CLEAR_TOLERANCE)
+        radius, cand, usable, ratio, conflict = at_once_ratios(vo, r, v, valid, mx, p)
+        band, first, best = bands_from_ratio(cand, ratio, usable, wanted_sides(committed_side, n))
         rate = DEFAULT_TURN_RATE if turn_rate is None else turn_rate
         horizon = p.lookahead_s if p.turn_horizon_s is None else p.turn_horizon_s
         turn = np.full((n, 3), -1, dtype=np.int64)
