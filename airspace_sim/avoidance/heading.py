@@ -225,26 +225,25 @@ def _on_tangent_ray(psi, cos_psi, sin_psi, vox, voy, vix, viy, ux, uy, scale):  
 
 
 @njit(inline="always", error_model="numpy")
-def _on_tangent_ray_lazy(
-    psi, cos_psi, sin_psi, vox, voy, vix, viy, ux, uy, sv, approx
-):  # pragma: no cover
-    """:func:`_on_tangent_ray` with ``scale = sv + hypot(vix, viy)`` taken only when the
-    fast test is not decisive with ``approx``, that scale from ``sqrt`` (``sv + √(vix² +
-    viy²)``, within a few ulp of it; inf or NaN where the squares overflow, and then no
-    decision here): a λ beyond ``approx``'s guard band is beyond the exact one's by far
-    more than the fast λ's error, so the decision is the same; elsewhere
-    :func:`_on_tangent_ray` decides with the exact scale."""
+def _ray_fast(cos_psi, sin_psi, vox, voy, vix, viy, ux, uy, approx):  # pragma: no cover
+    """:func:`_on_tangent_ray`'s fast test without the root itself: 1 (on the ray), 0 (not)
+    or 2 (undecided: call :func:`_on_tangent_ray` with the root and the exact scale).
+    ``cos_psi``, ``sin_psi`` within ~3·10⁻⁸ of the root's cos and sin (the angle-sum
+    formula, also with ``√(a² + b²)`` for ``hypot(a, b)``); ``approx`` the scale ``|v_o| +
+    |v_i|`` within a few ulp (from ``sqrt``; inf or NaN where the squares overflow: then
+    undecided). A λ beyond the guard band of ``approx`` is beyond the exact scale's by far
+    more than the fast λ's error, so a decision here is the exact one; so the roots off
+    the ray need no ``atan2`` or ``acos``."""
     threshold = 1e-12 * approx
     guard = _RAY_GUARD * approx
     wx = vix - (cos_psi * vox - sin_psi * voy)
     wy = viy - (sin_psi * vox + cos_psi * voy)
     lam = _sum2(wx * ux, wy * uy)
     if lam > threshold + guard:
-        return True
+        return 1
     if lam < threshold - guard:
-        return False
-    scale = sv + np.hypot(vix, viy)
-    return _on_tangent_ray(psi, cos_psi, sin_psi, vox, voy, vix, viy, ux, uy, scale)
+        return 0
+    return 2
 
 
 #: guard band of the search-window test, on the cosine of a root (see :func:`_pair_roots`);
@@ -300,9 +299,9 @@ def _pair_roots(
     with certainly no root skip ``hypot`` too, and the range equation also when both its
     roots are outside (:func:`_may_have_roots`; nine in ten tangent equations have a root
     in the window, so theirs go straight to the exact test). A root inside the window, or
-    near its edge, is computed as the numpy reference computes it. The ray test's scale
-    ``|v_o| + |v_i|`` comes from ``sqrt``, ``hypot`` only near the test's threshold
-    (:func:`_on_tangent_ray_lazy`).
+    near its edge, is computed as the numpy reference computes it. A tangent root's window
+    and ray tests come first, from ``√(a² + b²)`` and ``sv + √(|v_i|²)`` (:func:`_ray_fast`),
+    then ``hypot``, ``atan2`` and ``acos`` for the equations with a root that passed.
     """
     packed = m >= 0
     if not packed:
@@ -327,15 +326,24 @@ def _pair_roots(
         b = _sum2(nx * -voy, ny * vox)
         c = _sum2(nx * vix, ny * viy)
         # certainly no root (the first test of _may_have_roots); its window test is left to
-        # the exact one below: nine in ten tangent equations have a root in the window, and
-        # the screen's square root and divisions cost more than the hypot they save
+        # the one below: nine in ten tangent equations have a root in the window
         amp2 = a * a + b * b
-        if 1e-280 < amp2 < 1e280 and c * c > amp2 * (1.0 + 1e-9):
+        normal = 1e-280 < amp2 < 1e280
+        c2 = c * c
+        if normal and c2 > amp2 * (1.0 + 1e-9):
             continue
-        # scalar _solve_cos_sin (no atan2 without a root); amp once for both uses
-        amp = np.hypot(a, b)
-        if not (abs(c / amp) <= 1.0):
-            continue
+        # certainly two roots: the window and ray tests from amp = √(a² + b²) (a few ulp
+        # from hypot), and hypot, atan2 and acos only for a root that passes them (a
+        # third of these equations has no root on the ray in the window); near |c| = amp,
+        # or where a² + b² could overflow or underflow, the exact amp first, as numpy
+        sure = normal and c2 < amp2 * (1.0 - 1e-9)
+        if sure:
+            amp = np.sqrt(amp2)
+        else:
+            # scalar _solve_cos_sin (no atan2 without a root)
+            amp = np.hypot(a, b)
+            if not (abs(c / amp) <= 1.0):
+                continue
         # roots φ ∓ h: cos φ = a/amp, sin φ = b/amp, cos h = c/amp, sin h ≥ 0
         cphi, sphi = a / amp, b / amp
         ch = min(max(c / amp, -1.0), 1.0)
@@ -345,19 +353,29 @@ def _pair_roots(
         in_m, in_p = not (cos_m < cos_min), not (cos_p < cos_min)
         if not (in_m or in_p):
             continue
-        phi = np.arctan2(b, a)
-        half = np.arccos(min(max(c / amp, -1.0), 1.0))
         if approx < 0.0:
             approx = sv + np.sqrt(vix * vix + viy * viy)
         # λ > 0: the tangent ray
-        if in_m:
+        ray_m = _ray_fast(cos_m, sin_m, vox, voy, vix, viy, ux, uy, approx) if in_m else 0
+        ray_p = _ray_fast(cos_p, sin_p, vox, voy, vix, viy, ux, uy, approx) if in_p else 0
+        if ray_m == 0 and ray_p == 0:
+            continue
+        if sure:
+            amp = np.hypot(a, b)
+        phi = np.arctan2(b, a)
+        half = np.arccos(min(max(c / amp, -1.0), 1.0))
+        if ray_m != 0:
             root = _wrap(phi - half)
-            if _on_tangent_ray_lazy(root, cos_m, sin_m, vox, voy, vix, viy, ux, uy, sv, approx):
+            if ray_m == 1 or _on_tangent_ray(
+                root, cos_m, sin_m, vox, voy, vix, viy, ux, uy, sv + np.hypot(vix, viy)
+            ):
                 out[m if packed else 2 * s] = root
                 m += packed
-        if in_p:
+        if ray_p != 0:
             root = _wrap(phi + half)
-            if _on_tangent_ray_lazy(root, cos_p, sin_p, vox, voy, vix, viy, ux, uy, sv, approx):
+            if ray_p == 1 or _on_tangent_ray(
+                root, cos_p, sin_p, vox, voy, vix, viy, ux, uy, sv + np.hypot(vix, viy)
+            ):
                 out[m if packed else 2 * s + 1] = root
                 m += packed
     # range_at_time_heading_changes at t = T
