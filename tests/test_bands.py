@@ -632,40 +632,6 @@ def test_search_kernels_with_intruders_inside_the_radius_equal_the_full_band(see
     assert (best <= now).all() and (best == now).sum() > 10
 
 
-@pytest.mark.parametrize("seed", range(3))
-def test_band_rows_best_ratio_is_the_kernel_ratio_of_the_best_blocked(seed):
-    """band_rows' best_ratio (the fast path's score of a best blocked candidate) is
-    cpa_min_ratio of that candidate, bit for bit, and −inf where there is none."""
-    from airspace_sim.avoidance.bands import _grid
-    from airspace_sim.avoidance.cpa import band_rows
-
-    rng = np.random.default_rng(50 + seed)
-    n, k = 300, 12
-    heading = rng.uniform(-np.pi, np.pi, n)
-    vo = 230.0 * np.stack([np.cos(heading), np.sin(heading)], axis=1)
-    r = rng.uniform(-12000.0, 12000.0, (n, k, 2))
-    v = rng.uniform(-400.0, 400.0, (n, k, 2))
-    valid = rng.random((n, k)) < 0.8
-    radius = np.full((n, k), 3300.0)
-    mx = np.radians(rng.choice([3.0, 45.0, 90.0], n))
-    grid = _grid(mx, np.radians(1.0))
-    extra = rng.uniform(-1.6, 1.6, (n, 6))
-    n_extra = rng.integers(0, 7, n)
-    wanted = rng.random((n, 2)) < 0.8
-    cand, _, best, _, best_ratio = band_rows(
-        vo, r, v, valid, radius, 120.0, mx, extra, n_extra, grid, 0.0, 1.0 - 1e-9, wanted
-    )
-    some = 0
-    for col in range(2):
-        rows = np.flatnonzero(best[:, col] >= 0)
-        some += rows.size
-        psi = cand[rows, best[rows, col]][:, None]
-        want = cpa_min_ratio(vo[rows], r[rows], v[rows], valid[rows], psi, radius[rows], 120.0)
-        np.testing.assert_array_equal(best_ratio[rows, col], want[:, 0])
-        assert (best_ratio[best[:, col] < 0, col] == -np.inf).all()
-    assert some > 50
-
-
 def test_clear_ratio2_is_the_square_root_test():
     # q2 >= clear_ratio2(t) decides like np.sqrt(q2) >= t, at and around the edge, for the
     # band search's threshold and others

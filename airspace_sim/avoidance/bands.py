@@ -326,7 +326,7 @@ def band_search(
             extra, n_extra = exact_boundary_candidates_in_window(
                 vo, r, v, valid, radius, lookahead_s, mx
             )
-        cand, first, best, ratio0, best_ratio = band_rows(
+        cand, first, best, ratio0 = band_rows(
             np.ascontiguousarray(vo),
             np.ascontiguousarray(r),
             np.ascontiguousarray(v),
@@ -346,14 +346,7 @@ def band_search(
 
         def score(idx):  # the ratio of the candidates idx (−1: −inf), on the rows with one
             out = np.full(n, -np.inf)
-            # the best blocked candidates' ratios come from band_rows (the same kernel
-            # arithmetic); any other index is evaluated here
-            known = np.zeros(n, dtype=bool)
-            for col in range(2):
-                hit = (idx >= 0) & (idx == best[:, col]) & ~known
-                out[hit] = best_ratio[hit, col]
-                known |= hit
-            sel = np.flatnonzero((idx >= 0) & ~known)
+            sel = np.flatnonzero(idx >= 0)
             if sel.size:
                 psi = cand[sel, idx[sel]][:, None]
                 out[sel] = cpa_min_ratio(

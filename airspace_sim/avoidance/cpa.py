@@ -719,13 +719,9 @@ def band_rows(
     m; ``extra`` (N, E) rad the boundary roots, of which row ``n`` uses the first
     ``n_extra[n]``, the others NaN).
 
-    Returns ``(candidates (N, C), first_clear (N, 3), best_blocked (N, 2), ratio0 (N,),
-    best_ratio (N, 2))``, the arrays of those functions, without the (N, C) origin and
-    usable arrays between them and with each row's sorted candidates still in cache when
-    they are searched; ``best_ratio`` the minimum CPA ratio of each ``best_blocked``
-    candidate (−inf where −1), computed as :func:`_cpa_kernel` computes it for that
-    candidate (the band search's choice compares them; this saves a kernel call on
-    gathered copies of those rows).
+    Returns ``(candidates (N, C), first_clear (N, 3), best_blocked (N, 2), ratio0 (N,))``,
+    the arrays of those functions, without the (N, C) origin and usable arrays between
+    them and with each row's sorted candidates still in cache when they are searched.
     """
     n_own, n_int = valid.shape
     n_cand = grid.size + 2 + extra.shape[1]
@@ -733,7 +729,6 @@ def band_rows(
     first = np.full((n_own, 3), -1, dtype=np.int64)
     best = np.full((n_own, 2), -1, dtype=np.int64)
     ratio0 = np.empty(n_own)
-    best_ratio = np.full((n_own, 2), -np.inf)
     all_v, all_m, all_l, all_i = _grid_order(grid, left_penalty)
     cos_grid, sin_grid = _grid_trig(grid)
     clear2 = _sqrt_threshold(threshold)
@@ -829,25 +824,4 @@ def band_rows(
                     cos_grid,
                     sin_grid,
                 )
-        for col in range(2):
-            c = best[n, col]
-            if c < 0:
-                continue
-            if col == 1 and c == best[n, 0]:
-                best_ratio[n, 1] = best_ratio[n, 0]
-                continue
-            # _cpa_kernel's operations for row n and candidate c, in its order (over the
-            # packed intruders: the same values, inv_r2 being _cpa_ratio2's factor)
-            p = row[c]
-            if np.isnan(p) and n_int > 0:
-                best_ratio[n, col] = np.nan
-                continue
-            pc, ps = np.cos(p), np.sin(p)
-            rvx = pc * vox - ps * voy
-            rvy = ps * vox + pc * voy
-            b = np.inf
-            for k in range(n_valid):
-                q2 = _cpa_d2(px[k], py[k], wx[k], wy[k], rvx, rvy, lookahead_s) * inv_r2[k]
-                b = min(b, q2)
-            best_ratio[n, col] = np.sqrt(b)
-    return cand, first, best, ratio0, best_ratio
+    return cand, first, best, ratio0
