@@ -265,6 +265,42 @@ def test_tangent_ray_test_is_the_reference_decision_near_its_threshold():
         assert got == ref
 
 
+def test_fast_ray_test_decides_only_as_the_exact_test():
+    # _ray_fast decides (0 / 1) with a scale from sqrt (a few ulp off; inf or NaN: never)
+    # only where _on_tangent_ray with the exact scale sv + hypot(v_i) decides the same,
+    # also with cos / sin off by up to 5e-8 and relative speeds at the threshold
+    from airspace_sim.avoidance.heading import _on_tangent_ray, _ray_fast
+
+    rng = np.random.default_rng(10)
+    decided = 0
+    for _ in range(3000):
+        psi = rng.uniform(-np.pi, np.pi)
+        vo = rotate(np.array([rng.uniform(50.0, 300.0), 0.0]), rng.uniform(-np.pi, np.pi))
+        u = rotate(np.array([1.0, 0.0]), rng.uniform(-np.pi, np.pi))
+        ro = np.array([np.cos(psi) * vo[0] - np.sin(psi) * vo[1], 0.0])
+        ro[1] = np.sin(psi) * vo[0] + np.cos(psi) * vo[1]
+        sv = float(np.hypot(*vo))
+        scale0 = 2.0 * sv
+        lam = rng.choice([0.0, 1e-12, 1e-9, 1e-7, 1e-6, 1e-3, 1.0]) * scale0
+        vi = ro + lam * rng.choice([-1, 1, 2]) * u
+        exact = sv + float(np.hypot(*vi))
+        approx = rng.choice(
+            [exact, np.nextafter(exact, 0.0), np.nextafter(exact, np.inf), exact * (1 + 4e-16)]
+            + [np.inf, np.nan]
+        )
+        e = rng.uniform(-5e-8, 5e-8, 2)
+        c, s_ = np.cos(psi) + e[0], np.sin(psi) + e[1]
+        got = _ray_fast(c, s_, *vo, *vi, *u, approx)
+        if np.isfinite(approx):
+            assert got in (0, 1, 2)
+        else:
+            assert got == 2
+        if got != 2:
+            decided += 1
+            assert bool(got) == _on_tangent_ray(psi, c, s_, *vo, *vi, *u, exact)
+    assert decided > 500
+
+
 def test_wrap_kernel_is_numpy_wrap_angle_bit_for_bit():
     # the kernel's wrap skips fmod for |x + π| < 4π; on and around every branch edge, far
     # outside them, and at signed zeros, it must give numpy's bits
@@ -308,8 +344,10 @@ def test_roots_in_window_are_the_kernel_roots_inside_the_window(seed):
     radius = np.full((n, k), 3300.0)
     limit = rng.choice([0.0, 0.05, np.pi / 2, np.pi - 1e-9, np.pi, 4.0, np.nan], n)
     limit[:20] = np.pi / 2
+    rel = vi - vo[:, None, :]  # the window kernel takes the relative velocity, adds vo
+    vi = rel + vo[:, None, :]
     full = boundary_heading_changes(vo, r, vi, valid, radius, 120.0).reshape(n, -1)
-    got, count = boundary_roots_in_window(vo, r, vi, valid, radius, 120.0, limit)
+    got, count = boundary_roots_in_window(vo, r, rel, valid, radius, 120.0, limit)
     assert got.shape == full.shape
     kept_some_out = False
     for i in range(n):

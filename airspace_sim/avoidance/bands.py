@@ -235,11 +235,11 @@ def exact_boundary_candidates_in_window(
     the roots."""
     vo = np.ascontiguousarray(own_velocity, dtype=float)
     r = np.ascontiguousarray(rel_position, dtype=float)
-    vi = np.ascontiguousarray(np.asarray(rel_velocity, dtype=float) + vo[:, None, :])
+    v = np.ascontiguousarray(rel_velocity, dtype=float)  # the kernel adds vo
     valid = np.ascontiguousarray(valid, dtype=bool)
     radius = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, dtype=float), r.shape[:-1]))
     limit = np.ascontiguousarray(np.broadcast_to(np.asarray(limit, dtype=float), vo.shape[:1]))
-    return boundary_roots_in_window(vo, r, vi, valid, radius, float(lookahead_s), limit)
+    return boundary_roots_in_window(vo, r, v, valid, radius, float(lookahead_s), limit)
 
 
 def exact_boundary_candidates_numpy(

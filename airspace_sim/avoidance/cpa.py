@@ -213,35 +213,48 @@ def _sqrt_threshold(t):  # pragma: no cover - compiled
 
 
 @njit(inline="always", error_model="numpy")
-def _row_inverse_r2(radius, valid, n, inv_r2):  # pragma: no cover - compiled
-    """``inv_r2[k] = 1 / radius[n, k]²`` for the valid slots of row ``n`` (the factor
-    :func:`_cpa_ratio2` computes per pair, once per row: the same bits)."""
+def _pack_row(vo, r, v, valid, radius, n, px, py, wx, wy, inv_r2):  # pragma: no cover
+    """Row ``n``'s valid intruders packed in slot order into the (K,) scratch arrays: the
+    relative position ``px``, ``py`` (m), the intruder's world velocity ``wx``, ``wy``
+    (m/s, ``v + vo``, the addition :func:`_cpa_kernel` makes per pair) and ``inv_r2 = 1 /
+    radius²`` (the factor :func:`_cpa_ratio2` takes per pair), once per row: the same
+    bits, and the scans' inner loops run over a few contiguous values without a test of
+    ``valid`` (about half the slots of a padded row). Returns their number."""
+    vox, voy = vo[n, 0], vo[n, 1]
+    m = 0
     for k in range(valid.shape[1]):
         if valid[n, k]:
-            inv_r2[k] = 1.0 / (radius[n, k] * radius[n, k])
+            px[m], py[m] = r[n, k, 0], r[n, k, 1]
+            wx[m], wy[m] = v[n, k, 0] + vox, v[n, k, 1] + voy
+            inv_r2[m] = 1.0 / (radius[n, k] * radius[n, k])
+            m += 1
+    return m
 
 
 @njit(cache=True, error_model="numpy")
 def _first_clear_row(
-    vo,
-    r,
-    v,
-    valid,
+    vox,
+    voy,
+    px,
+    py,
+    wx,
+    wy,
     inv_r2,
+    n_valid,
     clear2,
     lookahead_s,
     psi,
     usable,
     origin,
     n_scan,
-    n,
     cos_grid,
     sin_grid,
     blockers,
     out,
 ):  # pragma: no cover - compiled
-    """Row ``n``'s first clear candidate of each side into ``out`` (3,) (the columns of
-    ``first_clear``; −1: none).
+    """A row's first clear candidate of each side into ``out`` (3,) (the columns of
+    ``first_clear``; −1: none). Own velocity ``vox``, ``voy`` m/s; the row's ``n_valid``
+    intruders packed by :func:`_pack_row` (``px`` … ``inv_r2``).
 
     ``psi``, ``usable``, ``origin`` (C,): the row's candidates sorted by preference, usable
     (not NaN) and their grid index or −1 (the cos and sin of grid values come from the
@@ -249,7 +262,7 @@ def _first_clear_row(
     scanned. Each candidate is tested with the arithmetic of :func:`_cpa_kernel`,
     intruder by intruder, stopping at the first one whose squared ratio is below
     ``clear2`` (:func:`clear_ratio2` of the threshold: no square root per pair;
-    ``inv_r2`` from :func:`_row_inverse_r2`); the scan stops once every side has a clear
+    per pair); the scan stops once every side has a clear
     candidate, so the work is about the blocked candidates before the first clear ones,
     not C·K. The last intruder that blocked a candidate on the same side (ψ ≤ 0 or ψ > 0,
     ``blockers`` (2,) scratch) is tried first: neighbouring candidates on a side are
@@ -261,14 +274,11 @@ def _first_clear_row(
     such a row has no clear candidate and is not scanned.
     """
     out[0] = out[1] = out[2] = -1
-    n_int = valid.shape[1]
-    vox, voy = vo[n, 0], vo[n, 1]
-    for k in range(n_int):
-        if valid[n, k]:
-            rx, ry = r[n, k, 0], r[n, k, 1]
-            # the current (distance / radius)², _cpa_d2 at t = 0
-            if not (max(rx * rx + ry * ry, 0.0) * inv_r2[k] >= clear2):
-                return
+    for k in range(n_valid):
+        rx, ry = px[k], py[k]
+        # the current (distance / radius)², _cpa_d2 at t = 0
+        if not (max(rx * rx + ry * ry, 0.0) * inv_r2[k] >= clear2):
+            return
     blockers[0] = blockers[1] = -1
     for c in range(n_scan):
         if not usable[c]:
@@ -288,22 +298,12 @@ def _first_clear_row(
         clear = True
         sd = 0 if p <= 0.0 else 1
         blocker = blockers[sd]
-        for j in range(-1, n_int):
+        for j in range(-1, n_valid):
             k = blocker if j < 0 else j
-            if k < 0 or (j >= 0 and k == blocker) or not valid[n, k]:
+            if k < 0 or (j >= 0 and k == blocker):
                 continue
             if not (
-                _cpa_d2(
-                    r[n, k, 0],
-                    r[n, k, 1],
-                    v[n, k, 0] + vox,
-                    v[n, k, 1] + voy,
-                    rvx,
-                    rvy,
-                    lookahead_s,
-                )
-                * inv_r2[k]
-                >= clear2
+                _cpa_d2(px[k], py[k], wx[k], wy[k], rvx, rvy, lookahead_s) * inv_r2[k] >= clear2
             ):
                 clear = False
                 blockers[sd] = k
@@ -319,22 +319,24 @@ def _first_clear_row(
 
 @njit(cache=True, error_model="numpy")
 def _best_blocked_row(
-    vo,
-    r,
-    v,
-    valid,
+    vox,
+    voy,
+    px,
+    py,
+    wx,
+    wy,
     inv_r2,
+    n_valid,
     lookahead_s,
     psi,
     usable,
     origin,
     n_scan,
-    n,
     side,
     cos_grid,
     sin_grid,
 ):  # pragma: no cover - compiled
-    """Index of row ``n``'s candidate on ``side`` (0: ψ ≤ 0, 1: ψ ≥ 0) of largest minimum
+    """Index of a row's candidate on ``side`` (0: ψ ≤ 0, 1: ψ ≥ 0) of largest minimum
     CPA ratio (the first in order among equals), −1 if the side has none; candidates as
     in :func:`_first_clear_row`. A max-min search that stops evaluating a candidate once
     its running minimum cannot beat the best so far.
@@ -348,16 +350,13 @@ def _best_blocked_row(
     stops once the best reaches it. Same arithmetic as :func:`_cpa_kernel`, so the same
     choice as the full evaluation.
     """
-    n_int = valid.shape[1]
-    vox, voy = vo[n, 0], vo[n, 1]
     res = -1
     best = -np.inf
     guess = -1
     top2 = np.inf  # the smallest current (distance / radius)²
-    for k in range(n_int):
-        if valid[n, k]:
-            rx, ry = r[n, k, 0], r[n, k, 1]
-            top2 = min(top2, max(rx * rx + ry * ry, 0.0) * inv_r2[k])
+    for k in range(n_valid):
+        rx, ry = px[k], py[k]
+        top2 = min(top2, max(rx * rx + ry * ry, 0.0) * inv_r2[k])
     top = np.sqrt(top2)
     for c in range(n_scan):
         if best >= top:
@@ -376,22 +375,11 @@ def _best_blocked_row(
         m2 = np.inf
         m = np.inf
         arg = -1
-        for j in range(-1, n_int):
+        for j in range(-1, n_valid):
             k = guess if j < 0 else j
-            if k < 0 or (j >= 0 and k == guess) or not valid[n, k]:
+            if k < 0 or (j >= 0 and k == guess):
                 continue
-            q2 = (
-                _cpa_d2(
-                    r[n, k, 0],
-                    r[n, k, 1],
-                    v[n, k, 0] + vox,
-                    v[n, k, 1] + voy,
-                    rvx,
-                    rvy,
-                    lookahead_s,
-                )
-                * inv_r2[k]
-            )
+            q2 = _cpa_d2(px[k], py[k], wx[k], wy[k], rvx, rvy, lookahead_s) * inv_r2[k]
             if q2 < m2:
                 m2 = q2
                 m = np.sqrt(q2)
@@ -747,24 +735,23 @@ def band_rows(
     origin = np.empty(n_cand, np.int64)
     usable, xv, xm, xl, xi, xb, perm, count, tail, nt, gstart = _sort_scratch(n_cand)
     blockers = np.empty(2, dtype=np.int64)
+    # the row's intruders packed (_pack_row)
+    px, py, wx, wy = np.empty(n_int), np.empty(n_int), np.empty(n_int), np.empty(n_int)
     inv_r2 = np.empty(n_int)
     cs, sn = np.cos(0.0), np.sin(0.0)
     fv, fm, fl, fi = all_v.copy(), all_m.copy(), all_l.copy(), all_i.copy()
     nf, inv_w, nb, last = -1, 0.0, 1, np.nan
     for n in range(n_own):
-        # _cpa_kernel at ψ = 0, its operations in its order
-        rvx = cs * vo[n, 0] - sn * vo[n, 1]
-        rvy = sn * vo[n, 0] + cs * vo[n, 1]
+        vox, voy = vo[n, 0], vo[n, 1]
+        n_valid = _pack_row(vo, r, v, valid, radius, n, px, py, wx, wy, inv_r2)
+        # _cpa_kernel at ψ = 0, its operations in its order (inv_r2 is _cpa_ratio2's factor)
+        rvx = cs * vox - sn * voy
+        rvy = sn * vox + cs * voy
         b = np.inf
-        for k in range(n_int):
-            if valid[n, k]:
-                wx, wy = v[n, k, 0] + vo[n, 0], v[n, k, 1] + vo[n, 1]
-                q2 = _cpa_ratio2(
-                    r[n, k, 0], r[n, k, 1], wx, wy, rvx, rvy, lookahead_s, radius[n, k]
-                )
-                b = min(b, q2)
+        for k in range(n_valid):
+            q2 = _cpa_d2(px[k], py[k], wx[k], wy[k], rvx, rvy, lookahead_s) * inv_r2[k]
+            b = min(b, q2)
         ratio0[n] = np.sqrt(b)
-        _row_inverse_r2(radius, valid, n, inv_r2)
         lim = _row_limit(mx[n])
         if nf < 0 or not lim == last:
             nf, inv_w, nb = _grid_inside(lim, all_v, all_m, all_l, all_i, fv, fm, fl, fi, gstart)
@@ -798,18 +785,20 @@ def band_rows(
         )
         row = cand[n]
         _first_clear_row(
-            vo,
-            r,
-            v,
-            valid,
+            vox,
+            voy,
+            px,
+            py,
+            wx,
+            wy,
             inv_r2,
+            n_valid,
             clear2,
             lookahead_s,
             row,
             usable,
             origin,
             n_scan,
-            n,
             cos_grid,
             sin_grid,
             blockers,
@@ -818,17 +807,19 @@ def band_rows(
         for col in range(2):
             if first[n, col] < 0 and wanted[n, col]:
                 best[n, col] = _best_blocked_row(
-                    vo,
-                    r,
-                    v,
-                    valid,
+                    vox,
+                    voy,
+                    px,
+                    py,
+                    wx,
+                    wy,
                     inv_r2,
+                    n_valid,
                     lookahead_s,
                     row,
                     usable,
                     origin,
                     n_scan,
-                    n,
                     col,
                     cos_grid,
                     sin_grid,

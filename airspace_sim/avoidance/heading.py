@@ -224,6 +224,28 @@ def _on_tangent_ray(psi, cos_psi, sin_psi, vox, voy, vix, viy, ux, uy, scale):  
     return _sum2(wx * ux, wy * uy) > threshold
 
 
+@njit(inline="always", error_model="numpy")
+def _ray_fast(cos_psi, sin_psi, vox, voy, vix, viy, ux, uy, approx):  # pragma: no cover
+    """:func:`_on_tangent_ray`'s fast test without the root itself: 1 (on the ray), 0 (not)
+    or 2 (undecided: call :func:`_on_tangent_ray` with the root and the exact scale).
+    ``cos_psi``, ``sin_psi`` within ~3·10⁻⁸ of the root's cos and sin (the angle-sum
+    formula, also with ``√(a² + b²)`` for ``hypot(a, b)``); ``approx`` the scale ``|v_o| +
+    |v_i|`` within a few ulp (from ``sqrt``; inf or NaN where the squares overflow: then
+    undecided). A λ beyond the guard band of ``approx`` is beyond the exact scale's by far
+    more than the fast λ's error, so a decision here is the exact one; so the roots off
+    the ray need no ``atan2`` or ``acos``."""
+    threshold = 1e-12 * approx
+    guard = _RAY_GUARD * approx
+    wx = vix - (cos_psi * vox - sin_psi * voy)
+    wy = viy - (sin_psi * vox + cos_psi * voy)
+    lam = _sum2(wx * ux, wy * uy)
+    if lam > threshold + guard:
+        return 1
+    if lam < threshold - guard:
+        return 0
+    return 2
+
+
 #: guard band of the search-window test, on the cosine of a root (see :func:`_pair_roots`);
 #: far above the angle-sum cos's error bound (≈ 2e-8)
 _WINDOW_GUARD = 1e-6
@@ -261,20 +283,29 @@ def _may_have_roots(a, b, c, cos_min):  # pragma: no cover - compiled
 
 @njit(cache=True, error_model="numpy")
 def _pair_roots(
-    vox, voy, sv, vv, bx, by, vix, viy, rad, lookahead_s, cos_lim, out
+    vox, voy, sv, vv, bx, by, vix, viy, rad, lookahead_s, cos_lim, out, m
 ):  # pragma: no cover
-    """The six boundary roots of one (ownship, intruder) pair into ``out`` (6,) (NaN where
-    none), as :func:`boundary_heading_changes` documents; ``sv = |v_o|``, ``vv = v_o·v_o``.
+    """The six boundary roots of one (ownship, intruder) pair, as
+    :func:`boundary_heading_changes` documents; ``sv = |v_o|``, ``vv = v_o·v_o``. With
+    ``m < 0`` into ``out`` (6,) in their columns (NaN where none); else the roots that
+    exist into ``out[m], out[m + 1], …`` in column order (the packed rows of
+    :func:`boundary_roots_in_window`, written in place: no scratch row to copy and test
+    for NaN). Returns the next ``m`` (``m`` itself for ``m < 0``).
 
     A root whose cosine, from the angle-sum formula (``cos φ = a/amp``, ``cos h = c/amp``,
     ``sin h = √(1 − cos²h)``, error ≲ 2·10⁻⁸), is below ``cos_lim`` − :data:`_WINDOW_GUARD`
     lies outside ``|ψ| ≤ limit`` (:func:`_window_cos`) and is left NaN without its
     ``atan2``, ``acos`` and wrap: the candidate sort drops such roots anyway. Equations
-    with certainly no root, or both roots outside, skip ``hypot`` too
-    (:func:`_may_have_roots`). A root inside the window, or near its edge, is computed as
-    the numpy reference computes it.
+    with certainly no root skip ``hypot`` too, and the range equation also when both its
+    roots are outside (:func:`_may_have_roots`; nine in ten tangent equations have a root
+    in the window, so theirs go straight to the exact test). A root inside the window, or
+    near its edge, is computed as the numpy reference computes it. A tangent root's window
+    and ray tests come first, from ``√(a² + b²)`` and ``sv + √(|v_i|²)`` (:func:`_ray_fast`),
+    then ``hypot``, ``atan2`` and ``acos`` for the equations with a root that passed.
     """
-    out[:] = np.nan
+    packed = m >= 0
+    if not packed:
+        out[:] = np.nan
     # tangent_direction: line of sight rotated by ±β
     dist = np.hypot(bx, by)
     ratio = rad / (dist if dist > 0 else 1.0) if dist > rad else 1.0
@@ -283,7 +314,7 @@ def _pair_roots(
         lx, ly = -bx / dist, -by / dist
     else:
         lx, ly = -1.0, 0.0
-    scale = -1.0  # sv + |v_i|, for the ray test: computed when a root needs it
+    approx = -1.0  # sv + |v_i| from sqrt, for the ray test: computed when a root needs it
     cos_min = cos_lim - _WINDOW_GUARD
     cb, sb = np.cos(beta), np.sin(beta)
     for s in range(2):
@@ -294,12 +325,25 @@ def _pair_roots(
         a = _sum2(nx * vox, ny * voy)
         b = _sum2(nx * -voy, ny * vox)
         c = _sum2(nx * vix, ny * viy)
-        if not _may_have_roots(a, b, c, cos_min):
+        # certainly no root (the first test of _may_have_roots); its window test is left to
+        # the one below: nine in ten tangent equations have a root in the window
+        amp2 = a * a + b * b
+        normal = 1e-280 < amp2 < 1e280
+        c2 = c * c
+        if normal and c2 > amp2 * (1.0 + 1e-9):
             continue
-        # scalar _solve_cos_sin (no atan2 without a root); amp once for both uses
-        amp = np.hypot(a, b)
-        if not (abs(c / amp) <= 1.0):
-            continue
+        # certainly two roots: the window and ray tests from amp = √(a² + b²) (a few ulp
+        # from hypot), and hypot, atan2 and acos only for a root that passes them (a
+        # third of these equations has no root on the ray in the window); near |c| = amp,
+        # or where a² + b² could overflow or underflow, the exact amp first, as numpy
+        sure = normal and c2 < amp2 * (1.0 - 1e-9)
+        if sure:
+            amp = np.sqrt(amp2)
+        else:
+            # scalar _solve_cos_sin (no atan2 without a root)
+            amp = np.hypot(a, b)
+            if not (abs(c / amp) <= 1.0):
+                continue
         # roots φ ∓ h: cos φ = a/amp, sin φ = b/amp, cos h = c/amp, sin h ≥ 0
         cphi, sphi = a / amp, b / amp
         ch = min(max(c / amp, -1.0), 1.0)
@@ -309,19 +353,31 @@ def _pair_roots(
         in_m, in_p = not (cos_m < cos_min), not (cos_p < cos_min)
         if not (in_m or in_p):
             continue
+        if approx < 0.0:
+            approx = sv + np.sqrt(vix * vix + viy * viy)
+        # λ > 0: the tangent ray
+        ray_m = _ray_fast(cos_m, sin_m, vox, voy, vix, viy, ux, uy, approx) if in_m else 0
+        ray_p = _ray_fast(cos_p, sin_p, vox, voy, vix, viy, ux, uy, approx) if in_p else 0
+        if ray_m == 0 and ray_p == 0:
+            continue
+        if sure:
+            amp = np.hypot(a, b)
         phi = np.arctan2(b, a)
         half = np.arccos(min(max(c / amp, -1.0), 1.0))
-        if scale < 0.0:
-            scale = sv + np.hypot(vix, viy)
-        # λ > 0: the tangent ray
-        if in_m:
+        if ray_m != 0:
             root = _wrap(phi - half)
-            if _on_tangent_ray(root, cos_m, sin_m, vox, voy, vix, viy, ux, uy, scale):
-                out[2 * s] = root
-        if in_p:
+            if ray_m == 1 or _on_tangent_ray(
+                root, cos_m, sin_m, vox, voy, vix, viy, ux, uy, sv + np.hypot(vix, viy)
+            ):
+                out[m if packed else 2 * s] = root
+                m += packed
+        if ray_p != 0:
             root = _wrap(phi + half)
-            if _on_tangent_ray(root, cos_p, sin_p, vox, voy, vix, viy, ux, uy, scale):
-                out[2 * s + 1] = root
+            if ray_p == 1 or _on_tangent_ray(
+                root, cos_p, sin_p, vox, voy, vix, viy, ux, uy, sv + np.hypot(vix, viy)
+            ):
+                out[m if packed else 2 * s + 1] = root
+                m += packed
     # range_at_time_heading_changes at t = T
     t = lookahead_s
     px, py = bx + t * vix, by + t * viy
@@ -329,10 +385,10 @@ def _pair_roots(
     b = _sum2(px * -voy, py * vox)
     c = (_sum2(px * px, py * py) + t * t * vv - rad * rad) / (2.0 * t)
     if not _may_have_roots(a, b, c, cos_min):
-        return
+        return m
     amp = np.hypot(a, b)
     if not (abs(c / amp) <= 1.0):
-        return
+        return m
     in_m = in_p = True
     if cos_lim > -np.inf:
         cphi, sphi = a / amp, b / amp
@@ -341,13 +397,16 @@ def _pair_roots(
         in_m = not (cphi * ch + sphi * sh < cos_min)
         in_p = not (cphi * ch - sphi * sh < cos_min)
         if not (in_m or in_p):
-            return
+            return m
     phi = np.arctan2(b, a)
     half = np.arccos(min(max(c / amp, -1.0), 1.0))
     if in_m:
-        out[4] = _wrap(phi - half)
+        out[m if packed else 4] = _wrap(phi - half)
+        m += packed
     if in_p:
-        out[5] = _wrap(phi + half)
+        out[m if packed else 5] = _wrap(phi + half)
+        m += packed
+    return m
 
 
 @njit(cache=True, error_model="numpy")
@@ -387,47 +446,48 @@ def boundary_heading_changes(vo, r, vi, valid, radius, lookahead_s):  # pragma: 
                     lookahead_s,
                     -np.inf,
                     out[n, k],
+                    -1,
                 )
     return out
 
 
 @njit(cache=True, error_model="numpy")
-def boundary_roots_in_window(vo, r, vi, valid, radius, lookahead_s, limit):  # pragma: no cover
+def boundary_roots_in_window(vo, r, v, valid, radius, lookahead_s, limit):  # pragma: no cover
     """The roots of :func:`boundary_heading_changes` that may lie in ``|ψ| ≤ limit[n]``,
     packed: ``(roots (N, 6K), count (N,))``, row ``n``'s ``count[n]`` roots first, in
     the order of that kernel's (K, 6) row, then NaN. Every root with ``|ψ| ≤ limit[n]``
     is there, with the same bits; the others left out are outside (the window test of
-    :func:`_pair_roots`). ``limit`` (N,) rad; other arguments as there."""
+    :func:`_pair_roots`). ``v`` (N, K, 2) m/s the *relative* velocity (intruder minus
+    ownship): the intruder's is ``v + vo`` (numpy's ``v + vo[:, None]``, the same
+    addition, done here instead of in a (N, K, 2) temporary); ``limit`` (N,) rad; other
+    arguments as there."""
     n_own, n_int = valid.shape
     out = np.full((n_own, 6 * n_int), np.nan)
     count = np.zeros(n_own, dtype=np.int64)
-    six = np.empty(6)
     for n in range(n_own):
         vox, voy = vo[n, 0], vo[n, 1]
         sv = np.hypot(vox, voy)
         vv = _sum2(vox * vox, voy * voy)
         cos_lim = _window_cos(limit[n])
+        row = out[n]
         m = 0
         for k in range(n_int):
             if not valid[n, k]:
                 continue
-            _pair_roots(
+            m = _pair_roots(
                 vox,
                 voy,
                 sv,
                 vv,
                 r[n, k, 0],
                 r[n, k, 1],
-                vi[n, k, 0],
-                vi[n, k, 1],
+                v[n, k, 0] + vox,
+                v[n, k, 1] + voy,
                 radius[n, k],
                 lookahead_s,
                 cos_lim,
-                six,
+                row,
+                m,
             )
-            for j in range(6):
-                if not np.isnan(six[j]):
-                    out[n, m] = six[j]
-                    m += 1
         count[n] = m
     return out, count

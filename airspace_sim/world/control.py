@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from airspace_sim.avoidance.cpa import cpa_min_ratio
+from airspace_sim.avoidance.cpa import clear_ratio2, cpa_min_ratio
 
 
 @dataclass
@@ -283,6 +283,7 @@ def screen(
         float(radius),
         float(lookahead),
         float(threshold),
+        clear_ratio2(float(threshold)),
         float(step),
     )
     return Encounters(enc.owners[keep_rows], rows, rp, rv, valid)
@@ -314,13 +315,17 @@ def screen_numpy(
 
 @njit(cache=True, error_model="numpy")
 def _screen_kernel(
-    vo, rows, rp, rv, valid, t, radius, lookahead, threshold, step
+    vo, rows, rp, rv, valid, t, radius, lookahead, threshold, threshold2, step
 ):  # pragma: no cover - compiled
     """Arrays of :func:`screen`: ``(keep_rows (n_own,) bool, rows (n, K'), rel_position,
     rel_velocity (n, K', 2), valid (n, K'))`` for the n kept rows. The CPA ratio at ψ = 0
     is :func:`~airspace_sim.avoidance.cpa._pair_ratio2`'s arithmetic with cos 0 = 1, sin 0 = 0,
     written out here rather than called: numba's on-disk cache of this kernel would not
     notice an edit of a helper in another module (tests/test_control.py checks the bits).
+    ``threshold2`` is :func:`~airspace_sim.avoidance.cpa.clear_ratio2` of ``threshold``:
+    a pair with a squared ratio below it decides that the row is kept (the minimum can
+    only fall further, ``sqrt`` is monotone, and a NaN minimum keeps the row too), so
+    the row's other pairs are not evaluated.
     """
     n_own, K = valid.shape
     keep_rows = np.zeros(n_own, dtype=np.bool_)
@@ -347,7 +352,10 @@ def _screen_kernel(
             tc = -dot / max(v2, 1e-300)
             tc = min(max(tc, 0.0), lookahead)
             d2 = (tc * v2 + 2.0 * dot) * tc + (rx * rx + ry * ry)
-            best = min(best, max(d2, 0.0) * inv_r2)
+            q2 = max(d2, 0.0) * inv_r2
+            best = min(best, q2)
+            if q2 < threshold2:
+                break
         if np.sqrt(best) >= threshold:
             continue
         keep_rows[o] = True

@@ -65,6 +65,19 @@ def _load(path: str, name: str):
     return mod
 
 
+def _window_args(fn, cap) -> list:
+    """A capture's ``boundary_roots_in_window`` arguments for ``fn``: up to commit d7a5a91
+    the kernel took the intruder velocity ``vi``, since then the relative velocity ``v``
+    (it adds ``vo`` itself); either is made from ``band_rows``' ``v`` and ``vo`` with the
+    addition the older glue made (``v + vo[:, None, :]``, the same bits), so captures and
+    kernels of either tree mix."""
+    args = list(cap["win"])
+    vo, v = cap["rows"][0], cap["rows"][2]
+    relative = fn.py_func.__code__.co_varnames[2] == "v"
+    args[2] = v if relative else np.ascontiguousarray(v + vo[:, None, :])
+    return args
+
+
 def _same(got, want) -> bool:
     return all(np.array_equal(g, w, equal_nan=True) for g, w in zip(got, want))
 
@@ -86,7 +99,11 @@ def time_kernels(path: str, specs: list[str], rounds: int = 15) -> None:
                 off.append(args)
             runs[name + " (no best blocked)"] = (mod.band_rows, off)
         else:
-            runs[name] = (mod.boundary_roots_in_window, "win")
+            fn = mod.boundary_roots_in_window
+            runs[name] = (fn, [_window_args(fn, c) for c in caps])
+            for c, args in zip(caps, runs[name][1]):
+                if not _same(fn(*args), c["win_out"]):
+                    raise SystemExit(f"{name}: output differs at step {c['step']}")
     for label, (fn, key) in runs.items():
         if isinstance(key, str):
             for c in caps:
