@@ -14,6 +14,14 @@ and a resolver kind (``kind:key=value``). For each pair that enters loss of sepa
   ``avoid`` (in conflict, flying the advice), ``hold`` (turn back refused), ``part``
   (a fraction of the turn back), ``back`` (the whole turn back) and the mean true turn
   rate of the run (deg/s, + left);
+- the resolver's advice on every step the aircraft was alerted, as runs ``[from..to s] psi
+  first->last deg side S clear|boxed ratio R by WHO (R_WHO)``: the target heading change
+  (the step flies at most the turn limit of it), the committed side after the step,
+  ``clear`` when a candidate on either side was clear (``boxed``: none), the resolver's
+  minimum ratio at the target (as flown for ``bands-flown``), and the intruder nearest to
+  the clear radius at the target judged at once (``B``: the other of the pair) with its
+  ratio; so ``side -1 clear ratio 0.6`` is an ownship committed right whose right side had
+  no clear heading while the left had one;
 - every resume decision in the window that let a turn back through (fraction > 0) while the
   other aircraft was one of its confirmed tracks within 2·R1: the fraction, the straight-line
   minimum distance to the other the rule predicted for that fraction and for holding, the
