@@ -131,11 +131,14 @@ def test_fresh_sides_only_is_model_turn_but_for_a_fresh_ownships_open_sides():
         assert (ratio[moved, idx[moved]] < 1.0).all()
 
 
-def test_switch_below_sends_a_boxed_committed_ownship_to_the_other_sides_clear_heading():
+@pytest.mark.parametrize("at_once", [False, True])
+def test_switch_below_sends_a_boxed_committed_ownship_to_the_other_sides_clear_heading(at_once):
     """switch_below: on random scenes the output is fresh_sides_only's except the committed
     side's best blocked where that side is boxed, the other side clear and the best blocked
-    ratio below the threshold; there it is the other side's first clear candidate."""
-    vo, r, v, valid, mx = _random_scene(5)
+    ratio below the threshold; there it is the other side's first clear candidate. With
+    switch_blocked_at_once, only where the committed side has no candidate clear at once
+    (the reported band is the at-once one)."""
+    vo, r, v, valid, mx = _random_scene(5, n=300)
     n = vo.shape[0]
     rate = np.full(n, RATE)
     kept = np.where(np.arange(n) % 3 == 0, 1.0, -1.0)
@@ -144,9 +147,10 @@ def test_switch_below_sends_a_boxed_committed_ownship_to_the_other_sides_clear_h
     base = FlownBandsResolver(FlownBandsResolver.Params(**p)).resolve(
         vo, r, v, valid, mx, turn_rate=rate, committed_side=kept
     )
-    switched = 0
+    switched = at_once_kept = 0
     for below in (0.6, 1.0):
-        out = FlownBandsResolver(FlownBandsResolver.Params(switch_below=below, **p)).resolve(
+        params = FlownBandsResolver.Params(switch_below=below, switch_blocked_at_once=at_once, **p)
+        out = FlownBandsResolver(params).resolve(
             vo, r, v, valid, mx, turn_rate=rate, committed_side=kept
         )
         np.testing.assert_array_equal(out.first_clear, base.first_clear)
@@ -161,11 +165,18 @@ def test_switch_below_sends_a_boxed_committed_ownship_to_the_other_sides_clear_h
                 & (b >= 0)
                 & (ratio < below)
             )
+            side_mask = base.candidates <= 0 if col == 0 else base.candidates >= 0
+            open_at_once = (base.band & side_mask).any(axis=1)
+            if at_once:
+                swap &= ~open_at_once
+            else:
+                at_once_kept += int((swap & open_at_once).sum())
             np.testing.assert_array_equal(
                 out.best_blocked[:, col], np.where(swap, base.first_clear[:, other], b)
             )
             switched += int(swap.sum())
     assert switched > 0
+    assert at_once or at_once_kept > 0  # the two rules differ on these scenes
 
 
 def test_switch_below_head_on_intruder_offset_to_the_right():

@@ -37,7 +37,10 @@ other side's first clear one, which the CDA policy then flies (it keeps the side
 its right preference a left-committed ownship already goes back right when a strictly right
 heading is clear). Traced on ``dense_random`` (``loss_trace.py dense:8``), most losses of
 ``fresh_sides_only`` had an ownship committed right fly its right side's best blocked
-heading (often ψ = 0, ratio 0.5–0.8) for 10–30 s while a left heading was clear as flown. Detection is ``"bands"``' straight CPA test at the current heading
+heading (often ψ = 0, ratio 0.5–0.8) for 10–30 s while a left heading was clear as flown.
+On the converging ring that fights the fresh rule (a fresh ownship commits the side open at
+once, the next step finds it boxed as flown and switches); ``switch_blocked_at_once`` keeps
+a committed side that is still open at once. Detection is ``"bands"``' straight CPA test at the current heading
 (the world's prefilter holds). Distances m, velocities m/s, times s, angles rad CCW positive.
 """
 
@@ -114,13 +117,16 @@ def fresh_flown_sides(candidates, clear, flown, wanted, committed_side=None):
     return first, best
 
 
-def switch_boxed_sides(first_clear, best_blocked, ratio, committed_side, switch_below):
+def switch_boxed_sides(
+    first_clear, best_blocked, ratio, committed_side, switch_below, open_at_once=None
+):
     """``best_blocked`` (N, 2) with the committed side's entry replaced by the other side's
     first clear candidate where the committed side (``committed_side`` (N,) −1 right,
     +1 left, 0 none) has no clear candidate, the other side has one, and the committed
     side's best blocked candidate has ``ratio`` (N, C) below ``switch_below``; a new array.
     ``first_clear`` (N, 3) and ``best_blocked`` (N, 2) indices as in
-    :func:`flown_sides` (−1: none)."""
+    :func:`flown_sides` (−1: none). With ``open_at_once`` (N, 2) bool (the sides ψ ≤ 0,
+    ψ ≥ 0 with a candidate clear at once) a committed side still open at once is kept."""
     best = best_blocked.copy()
     side = np.broadcast_to(np.asarray(committed_side, dtype=float), (best.shape[0],))
     rows = np.arange(best.shape[0])
@@ -128,6 +134,8 @@ def switch_boxed_sides(first_clear, best_blocked, ratio, committed_side, switch_
         b = best[:, col]
         score = np.where(b >= 0, ratio[rows, np.maximum(b, 0)], np.inf)
         boxed = (side == value) & (first_clear[:, col] < 0) & (first_clear[:, other] >= 0)
+        if open_at_once is not None:
+            boxed &= ~open_at_once[:, col]
         swap = boxed & (b >= 0) & (score < switch_below)
         best[:, col] = np.where(swap, first_clear[:, other], b)
     return best
@@ -151,6 +159,11 @@ class FlownBandsResolver(BandsResolver):
             "this (0: never)",
             ge=0.0,
             le=1.0,
+        )
+        switch_blocked_at_once: bool = param(
+            False,
+            doc="with switch_below: switch only when the committed side has no heading "
+            "clear at once either",
         )
 
     def resolve(
@@ -200,7 +213,12 @@ class FlownBandsResolver(BandsResolver):
         else:
             first, best = flown_sides(cand, clear, flown, wanted)
         if p.switch_below > 0.0 and committed_side is not None:
-            best = switch_boxed_sides(first, best, flown, committed_side, p.switch_below)
+            at_once = None
+            if p.switch_blocked_at_once:
+                at_once = np.stack(
+                    [(clear & (cand <= 0)).any(axis=1), (clear & (cand >= 0)).any(axis=1)], axis=1
+                )
+            best = switch_boxed_sides(first, best, flown, committed_side, p.switch_below, at_once)
         idx = np.arange(n)
         choice = band_choice(
             first, best, lambda i: np.where(i >= 0, flown[idx, np.maximum(i, 0)], -np.inf)
