@@ -129,3 +129,93 @@ def test_fresh_sides_only_is_model_turn_but_for_a_fresh_ownships_open_sides():
         top = np.max(np.where(mask & ~np.isnan(cand), ratio, -np.inf), axis=1)
         np.testing.assert_array_equal(ratio[moved, idx[moved]], top[moved])
         assert (ratio[moved, idx[moved]] < 1.0).all()
+
+
+@pytest.mark.parametrize("at_once", [False, True])
+def test_switch_below_sends_a_boxed_committed_ownship_to_the_other_sides_clear_heading(at_once):
+    """switch_below: on random scenes the output is fresh_sides_only's except the committed
+    side's best blocked where that side is boxed, the other side clear and the best blocked
+    ratio below the threshold; there it is the other side's first clear candidate. With
+    switch_blocked_at_once, only where the committed side has no candidate clear at once
+    (the reported band is the at-once one)."""
+    vo, r, v, valid, mx = _random_scene(5, n=300)
+    n = vo.shape[0]
+    rate = np.full(n, RATE)
+    kept = np.where(np.arange(n) % 3 == 0, 1.0, -1.0)
+    kept[np.arange(n) % 5 == 0] = 0.0
+    p = dict(lookahead_s=45.0, fresh_sides_only=True)
+    base = FlownBandsResolver(FlownBandsResolver.Params(**p)).resolve(
+        vo, r, v, valid, mx, turn_rate=rate, committed_side=kept
+    )
+    switched = at_once_kept = 0
+    for below in (0.6, 1.0):
+        params = FlownBandsResolver.Params(switch_below=below, switch_blocked_at_once=at_once, **p)
+        out = FlownBandsResolver(params).resolve(
+            vo, r, v, valid, mx, turn_rate=rate, committed_side=kept
+        )
+        np.testing.assert_array_equal(out.first_clear, base.first_clear)
+        np.testing.assert_array_equal(out.heading_change, base.heading_change)
+        for col, other, value in ((0, 1, -1.0), (1, 0, 1.0)):
+            b = base.best_blocked[:, col]
+            ratio = base.min_ratio[np.arange(n), np.maximum(b, 0)]
+            swap = (
+                (kept == value)
+                & (base.first_clear[:, col] < 0)
+                & (base.first_clear[:, other] >= 0)
+                & (b >= 0)
+                & (ratio < below)
+            )
+            side_mask = base.candidates <= 0 if col == 0 else base.candidates >= 0
+            open_at_once = (base.band & side_mask).any(axis=1)
+            if at_once:
+                swap &= ~open_at_once
+            else:
+                at_once_kept += int((swap & open_at_once).sum())
+            np.testing.assert_array_equal(
+                out.best_blocked[:, col], np.where(swap, base.first_clear[:, other], b)
+            )
+            switched += int(swap.sum())
+    assert switched > 0
+    assert at_once or at_once_kept > 0  # the two rules differ on these scenes
+
+
+def test_switch_below_head_on_intruder_offset_to_the_right():
+    """Ownship east at 230 m/s committed right, a head-on intruder 15 km ahead and 1 km to
+    the right, turn limit ±30°: every right turn steers toward the intruder's side and
+    stays inside 3.3 km as flown (a 30° right turn gains about v·sin 30°·t ≈ 3.4 km over the
+    ~30 s to the crossing, minus the 1 km offset), while a left turn clears it. Without the
+    switch the CDA policy flies the right side's best blocked heading; with it, the left
+    side's first clear one, which is clear as flown."""
+    from airspace_sim.world.policy import commit_reference
+
+    vo = np.array([[230.0, 0.0]])
+    r = np.array([[[15000.0, -1000.0]]])
+    v = np.array([[[-460.0, 0.0]]])
+    valid = np.ones((1, 1), bool)
+    mx = np.array([math.radians(30.0)])
+    rate = np.array([RATE])
+    side = np.array([-1.0])
+    picks = {}
+    for below in (0.0, 1.0):
+        res = FlownBandsResolver(
+            FlownBandsResolver.Params(fresh_sides_only=True, switch_below=below)
+        )
+        out = res.resolve(vo, r, v, valid, mx, turn_rate=rate, committed_side=side)
+        assert out.first_clear[0, 0] < 0 <= out.first_clear[0, 1]  # right boxed, left clear
+        psi, new_side = commit_reference(
+            "right",
+            out.heading_change,
+            out.conflict,
+            side,
+            out.candidates,
+            out.first_clear,
+            out.best_blocked,
+        )
+        picks[below] = psi[0]
+        assert new_side[0] == -1.0
+    assert picks[0.0] <= 0.0
+    assert picks[1.0] > 0.0
+    flown = cpa_min_ratio_turning(
+        vo, r, v, valid, np.array([[picks[0.0], picks[1.0]]]), 3300.0, 120.0, rate
+    )[0]
+    assert flown[0] < 1.0 <= flown[1] + 1e-9

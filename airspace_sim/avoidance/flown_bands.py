@@ -27,7 +27,20 @@ With ``fresh_sides_only`` everything is ``model_turn``'s (first clear as flown, 
 flown) except one thing: for an ownship not yet committed to a side, a side that is open at
 once but has no heading clear as flown reports its best as-flown heading as its first clear
 one, so the policy commits the side ``"bands"`` would (:func:`fresh_flown_sides`); once
-committed, the ownship flies ``model_turn``'s heading on that side. Detection is ``"bands"``' straight CPA test at the current heading
+committed, the ownship flies ``model_turn``'s heading on that side.
+
+With ``switch_below`` (a ratio in (0, 1], 0: off) an ownship committed to a side that has no
+heading clear as flown, while the other side has one, is sent to the other side when the
+committed side's best as-flown minimum CPA ratio is below ``switch_below``
+(:func:`switch_boxed_sides`): the committed side's best blocked candidate is reported as the
+other side's first clear one, which the CDA policy then flies (it keeps the side label; under
+its right preference a left-committed ownship already goes back right when a strictly right
+heading is clear). Traced on ``dense_random`` (``loss_trace.py dense:8``), most losses of
+``fresh_sides_only`` had an ownship committed right fly its right side's best blocked
+heading (often ψ = 0, ratio 0.5–0.8) for 10–30 s while a left heading was clear as flown.
+On the converging ring that fights the fresh rule (a fresh ownship commits the side open at
+once, the next step finds it boxed as flown and switches); ``switch_blocked_at_once`` keeps
+a committed side that is still open at once. Detection is ``"bands"``' straight CPA test at the current heading
 (the world's prefilter holds). Distances m, velocities m/s, times s, angles rad CCW positive.
 """
 
@@ -104,6 +117,30 @@ def fresh_flown_sides(candidates, clear, flown, wanted, committed_side=None):
     return first, best
 
 
+def switch_boxed_sides(
+    first_clear, best_blocked, ratio, committed_side, switch_below, open_at_once=None
+):
+    """``best_blocked`` (N, 2) with the committed side's entry replaced by the other side's
+    first clear candidate where the committed side (``committed_side`` (N,) −1 right,
+    +1 left, 0 none) has no clear candidate, the other side has one, and the committed
+    side's best blocked candidate has ``ratio`` (N, C) below ``switch_below``; a new array.
+    ``first_clear`` (N, 3) and ``best_blocked`` (N, 2) indices as in
+    :func:`flown_sides` (−1: none). With ``open_at_once`` (N, 2) bool (the sides ψ ≤ 0,
+    ψ ≥ 0 with a candidate clear at once) a committed side still open at once is kept."""
+    best = best_blocked.copy()
+    side = np.broadcast_to(np.asarray(committed_side, dtype=float), (best.shape[0],))
+    rows = np.arange(best.shape[0])
+    for value, col, other in ((-1.0, 0, 1), (1.0, 1, 0)):
+        b = best[:, col]
+        score = np.where(b >= 0, ratio[rows, np.maximum(b, 0)], np.inf)
+        boxed = (side == value) & (first_clear[:, col] < 0) & (first_clear[:, other] >= 0)
+        if open_at_once is not None:
+            boxed &= ~open_at_once[:, col]
+        swap = boxed & (b >= 0) & (score < switch_below)
+        best[:, col] = np.where(swap, first_clear[:, other], b)
+    return best
+
+
 @registry.register("resolver", "bands-flown")
 class FlownBandsResolver(BandsResolver):
     """``"bands"``' open sides, the heading on a side judged as flown (module docstring)."""
@@ -114,6 +151,19 @@ class FlownBandsResolver(BandsResolver):
             False,
             doc="judge everything as flown (model_turn) but which sides are open to an "
             "ownship not yet committed to one",
+        )
+        switch_below: float = param(
+            0.0,
+            doc="send an ownship whose committed side has no clear heading to the other "
+            "side's first clear one when the committed side's best as-flown ratio is below "
+            "this (0: never)",
+            ge=0.0,
+            le=1.0,
+        )
+        switch_blocked_at_once: bool = param(
+            False,
+            doc="with switch_below: switch only when the committed side has no heading "
+            "clear at once either",
         )
 
     def resolve(
@@ -162,6 +212,13 @@ class FlownBandsResolver(BandsResolver):
             first, best = fresh_flown_sides(cand, clear, flown, wanted, committed_side)
         else:
             first, best = flown_sides(cand, clear, flown, wanted)
+        if p.switch_below > 0.0 and committed_side is not None:
+            at_once = None
+            if p.switch_blocked_at_once:
+                at_once = np.stack(
+                    [(clear & (cand <= 0)).any(axis=1), (clear & (cand >= 0)).any(axis=1)], axis=1
+                )
+            best = switch_boxed_sides(first, best, flown, committed_side, p.switch_below, at_once)
         idx = np.arange(n)
         choice = band_choice(
             first, best, lambda i: np.where(i >= 0, flown[idx, np.maximum(i, 0)], -np.inf)

@@ -14,6 +14,14 @@ and a resolver kind (``kind:key=value``). For each pair that enters loss of sepa
   ``avoid`` (in conflict, flying the advice), ``hold`` (turn back refused), ``part``
   (a fraction of the turn back), ``back`` (the whole turn back) and the mean true turn
   rate of the run (deg/s, + left);
+- the resolver's advice on every step the aircraft was alerted, as runs ``[from..to s] psi
+  first->last deg side S clear|boxed ratio R by WHO (R_WHO)``: the target heading change
+  (the step flies at most the turn limit of it), the committed side after the step,
+  ``clear`` when a candidate on either side was clear (``boxed``: none), the resolver's
+  minimum ratio at the target (as flown for ``bands-flown``), and the intruder nearest to
+  the clear radius at the target judged at once (``B``: the other of the pair) with its
+  ratio; so ``side -1 clear ratio 0.6`` is an ownship committed right whose right side had
+  no clear heading while the left had one;
 - every resume decision in the window that let a turn back through (fraction > 0) while the
   other aircraft was one of its confirmed tracks within 2·R1: the fraction, the straight-line
   minimum distance to the other the rule predicted for that fraction and for holding, the
@@ -73,6 +81,80 @@ class Recorder:
         pol._resume_fraction = self._fraction
         pol._resume_clear = self._clear
         pol.override = self._override
+        # the resolver's advice per alerted aircraft (advise: prefilter, resolve, commit)
+        self.advice = collections.deque(maxlen=window_steps)  # (t, {owner: AdviceRow})
+        self._orig_advise, self._orig_prefilter = pol.advise, pol._prefilter
+        self._orig_resolve, self._orig_commit = pol.resolver.resolve, pol._commit
+        self._step_enc = self._step_out = self._step_psi = None
+        pol.advise, pol._prefilter, pol._commit = self._advise, self._prefilter, self._commit
+        pol.resolver.resolve = self._resolve
+
+    def _prefilter(self, enc, velocities):
+        self._step_enc = self._orig_prefilter(enc, velocities)
+        return self._step_enc
+
+    def _resolve(self, *args, **kwargs):
+        self._step_out = self._orig_resolve(*args, **kwargs)
+        return self._step_out
+
+    def _commit(self, *args, **kwargs):
+        out = self._orig_commit(*args, **kwargs)
+        self._step_psi = out
+        return out
+
+    def _advise(self, tracks, positions, velocities, active, max_heading_change):
+        """The policy's advise, recording for every alerted ownship: the target heading
+        change (rad; the step flies at most the turn limit of it), its minimum ratio as the resolver judged it (``min_ratio``: at once
+        for ``bands``, as flown for ``bands-flown``), whether any candidate was clear, the
+        committed side, and the intruder (world index) nearest to the clear radius at the
+        target heading judged at once, with that pair's ratio."""
+        self._step_enc = self._step_out = self._step_psi = None
+        pol = self.w.policy
+        t = self.w.time
+        advice, conflict = self._orig_advise(
+            tracks, positions, velocities, active, max_heading_change
+        )
+        rows = {}
+        enc, out = self._step_enc, self._step_out
+        if enc is None:
+            enc = pol._encounters
+        if out is not None and enc.owners.size == np.asarray(out.conflict).size:
+            view = tracks.view()
+            psi = np.asarray(out.heading_change, dtype=float)
+            if self._step_psi is not None:
+                psi = np.asarray(self._step_psi[0], dtype=float)
+            vo = velocities[enc.owners]
+            pair = cpa_pair_ratios(
+                vo,
+                enc.rel_position,
+                enc.rel_velocity,
+                enc.valid,
+                psi[:, None],
+                pol.r_safe * (1.0 + pol.margin),
+                pol.lookahead_s,
+            )[:, :, 0]
+            cand = None if out.candidates is None else np.asarray(out.candidates)
+            ratio = None if out.min_ratio is None else np.asarray(out.min_ratio)
+            for i, o in enumerate(enc.owners.tolist()):
+                if not out.conflict[i]:
+                    continue
+                k = int(np.argmin(np.where(enc.valid[i], pair[i], np.inf)))
+                who = int(view.intruder[enc.rows[i, k]]) if enc.valid[i, k] else -1
+                r_choice, any_clear = float("nan"), False
+                if cand is not None and ratio is not None:
+                    near = np.nanargmin(np.abs(cand[i] - psi[i]))
+                    r_choice = float(ratio[i, near])
+                    any_clear = bool((np.asarray(out.first_clear)[i, :2] >= 0).any())
+                rows[o] = (
+                    float(psi[i]),
+                    r_choice,
+                    any_clear,
+                    float(pol.side[o]),
+                    who,
+                    float(pair[i, k]),
+                )
+        self.advice.append((t, rows))
+        return advice, conflict
 
     def _predictions(self, enc, velocities, psi_row):
         """{owner: {intruder: (pred m at psi, pred m holding, mu, |r| m)}} for enc."""
@@ -184,6 +266,35 @@ def timeline(rec: Recorder, a: int, t_loss: float) -> str:
     return "; ".join(runs)
 
 
+def advice_runs(rec: Recorder, a: int, b: int, t_loss: float) -> str:
+    """Runs of aircraft a's alerted steps over the window: ``[from..to s] ψ from→to deg,
+    side, clear (a candidate clear on either side) or boxed, min ratio of the target
+    heading (the resolver's judgement), binding intruder (``B``: the other of the pair) and
+    its at-once ratio at the target heading``; times relative to the loss."""
+    runs, cur = [], None
+    for t, rows in rec.advice:
+        if a not in rows:
+            cur = None
+            continue
+        psi, ratio, clear, side, who, r_who = rows[a]
+        key = (clear, side, "B" if who == b else str(who))
+        if cur is not None and cur[0] == key and t - cur[2] <= rec.w.dt * 1.5:
+            cur[2], cur[4], cur[6] = t, psi, min(cur[6], ratio)
+            cur[7] = min(cur[7], r_who)
+            continue
+        cur = [key, t, t, psi, psi, side, ratio, r_who]
+        runs.append(cur)
+    out = []
+    for key, t0, t1, p0, p1, side, ratio, r_who in runs:
+        clear, _, who = key
+        out.append(
+            f"[{t0 - t_loss:+.0f}..{t1 - t_loss:+.0f}] psi {np.degrees(p0):+.0f}->"
+            f"{np.degrees(p1):+.0f} side {side:+.0f} {'clear' if clear else 'boxed'} "
+            f"ratio {ratio:.2f} by {who} ({r_who:.2f})"
+        )
+    return "; ".join(out) if out else "(not alerted)"
+
+
 def one_turn_avoids(p0, h0, speed, max_rate, other, dt, r_safe, max_tau_s=180.0) -> bool:
     """Can an aircraft at p0 (m), heading h0 (rad), speed (m/s) keep more than r_safe (m)
     from ``other`` (S, 2) m (positions every dt s from now) by turning at ±max_rate (rad/s)
@@ -238,6 +349,8 @@ def main(argv=None):
             print(f"\n#{n_loss} t={t_loss:.0f} s  A={ids[a]} B={ids[b]}")
             for x, name in ((a, "A"), (b, "B")):
                 print(f"  {name} timeline: {timeline(rec, x, t_loss)}")
+            for x, y, name in ((a, b, "A"), (b, a, "B")):
+                print(f"  {name} advice: {advice_runs(rec, x, y, t_loss)}")
             print("  every 10 s: t, distance, straight miss from truth / A's track / B's track, km")
             for i in range(len(rec.times) - 1, -1, -10)[::-1]:
                 d = rec.straight_miss(i, a, b)
