@@ -262,7 +262,7 @@ def _first_clear_row(
     scanned. Each candidate is tested with the arithmetic of :func:`_cpa_kernel`,
     intruder by intruder, stopping at the first one whose squared ratio is below
     ``clear2`` (:func:`clear_ratio2` of the threshold: no square root per pair;
-    per pair); the scan stops once every side has a clear
+    ``inv_r2`` from :func:`_pack_row`); the scan stops once every side has a clear
     candidate, so the work is about the blocked candidates before the first clear ones,
     not C·K. The last intruder that blocked a candidate on the same side (ψ ≤ 0 or ψ > 0,
     ``blockers`` (2,) scratch) is tried first: neighbouring candidates on a side are
