@@ -219,3 +219,90 @@ def test_switch_below_head_on_intruder_offset_to_the_right():
         vo, r, v, valid, np.array([[picks[0.0], picks[1.0]]]), 3300.0, 120.0, rate
     )[0]
     assert flown[0] < 1.0 <= flown[1] + 1e-9
+
+
+AO = dict(fresh_sides_only=True, switch_below=1.0, switch_blocked_at_once=True)
+
+
+def test_boxed_best_both_is_fresh_ao_except_where_boxed_on_both_sides():
+    """boxed_best_both: on random scenes the output is fresh:ao's (``AO``) except for a
+    committed ownship with no heading clear as flown on either side; there the committed
+    side's best blocked (and so the chosen heading) is the candidate of largest as-flown
+    ratio over both sides when that beats the committed side's own best."""
+    vo, r, v, valid, mx = _random_scene(7, n=400, k=8)
+    n = vo.shape[0]
+    rate = np.full(n, RATE)
+    kept = np.where(np.arange(n) % 3 == 0, 1.0, -1.0)
+    kept[np.arange(n) % 5 == 0] = 0.0
+    base = FlownBandsResolver(FlownBandsResolver.Params(**AO)).resolve(
+        vo, r, v, valid, mx, turn_rate=rate, committed_side=kept
+    )
+    out = FlownBandsResolver(FlownBandsResolver.Params(boxed_best_both=True, **AO)).resolve(
+        vo, r, v, valid, mx, turn_rate=rate, committed_side=kept
+    )
+    np.testing.assert_array_equal(out.first_clear, base.first_clear)
+    np.testing.assert_array_equal(out.min_ratio, base.min_ratio)
+    np.testing.assert_array_equal(out.conflict, base.conflict)
+    rows = np.arange(n)
+    usable = ~np.isnan(base.candidates)
+    score = np.where(usable, base.min_ratio, -np.inf)
+    top = np.argmax(score, axis=1)
+    boxed = (base.first_clear[:, 0] < 0) & (base.first_clear[:, 1] < 0)
+    swapped = np.zeros(n, dtype=bool)
+    for col, value in ((0, -1.0), (1, 1.0)):
+        b = base.best_blocked[:, col]
+        own = np.where(b >= 0, score[rows, np.maximum(b, 0)], -np.inf)
+        swap = boxed & (kept == value) & (score[rows, top] > own)
+        np.testing.assert_array_equal(out.best_blocked[:, col], np.where(swap, top, b))
+        swapped |= swap
+    assert swapped.sum() > 5
+    np.testing.assert_array_equal(out.heading_change[~swapped], base.heading_change[~swapped])
+    np.testing.assert_array_equal(
+        out.heading_change[swapped], base.candidates[swapped, top[swapped]]
+    )
+    # the rows that change are boxed on both sides and committed, never fresh
+    assert (kept[swapped] != 0).all()
+
+
+def test_boxed_best_both_head_on_intruder_offset_to_the_right():
+    """Ownship east at 230 m/s committed right, a head-on intruder 8 km ahead and 500 m to
+    the right, turn limit ±30°: ~17 s to the crossing, too short for a clear turn either way
+    (boxed on both sides as flown), but a left turn opens the miss further than any right
+    one. fresh:ao keeps the right side's best; with boxed_best_both the policy flies the
+    left heading of largest as-flown ratio, still committed right."""
+    from airspace_sim.world.policy import commit_reference
+
+    vo = np.array([[230.0, 0.0]])
+    r = np.array([[[8000.0, -500.0]]])
+    v = np.array([[[-460.0, 0.0]]])
+    valid = np.ones((1, 1), bool)
+    mx = np.array([math.radians(30.0)])
+    rate = np.array([RATE])
+    side = np.array([-1.0])
+    picks = {}
+    for both in (False, True):
+        params = FlownBandsResolver.Params(boxed_best_both=both, **AO)
+        out = FlownBandsResolver(params).resolve(
+            vo, r, v, valid, mx, turn_rate=rate, committed_side=side
+        )
+        assert (out.first_clear[0, :2] < 0).all()  # boxed on both sides
+        psi, new_side = commit_reference(
+            "right",
+            out.heading_change,
+            out.conflict,
+            side,
+            out.candidates,
+            out.first_clear,
+            out.best_blocked,
+        )
+        picks[both] = psi[0]
+        assert new_side[0] == -1.0
+    assert picks[False] <= 0.0 < picks[True]
+    cand = out.candidates[~np.isnan(out.candidates)][None, :]
+    flown = cpa_min_ratio_turning(vo, r, v, valid, cand, 3300.0, 120.0, rate)[0]
+    pair = cpa_min_ratio_turning(
+        vo, r, v, valid, np.array([[picks[False], picks[True]]]), 3300.0, 120.0, rate
+    )[0]
+    assert pair[0] < pair[1] < 1.0
+    assert pair[0] == pytest.approx(flown[cand[0] <= 0].max())
+    assert pair[1] == pytest.approx(flown.max())

@@ -40,7 +40,14 @@ heading is clear). Traced on ``dense_random`` (``loss_trace.py dense:8``), most 
 heading (often ψ = 0, ratio 0.5–0.8) for 10–30 s while a left heading was clear as flown.
 On the converging ring that fights the fresh rule (a fresh ownship commits the side open at
 once, the next step finds it boxed as flown and switches); ``switch_blocked_at_once`` keeps
-a committed side that is still open at once. Detection is ``"bands"``' straight CPA test at the current heading
+a committed side that is still open at once.
+
+With ``boxed_best_both`` an ownship committed to a side while *neither* side has a heading
+clear as flown (boxed on both sides) flies the best as-flown candidate over both sides (the
+largest as-flown minimum CPA ratio; the committed side's own best is kept on ties) instead
+of its committed side's best (:func:`best_of_both_when_boxed`); the side label is kept.
+Traced on ``fresh:ao`` (``results/loss_trace_switch_s21.txt``), every remaining dense loss
+had one aircraft boxed on both sides for 5 s or more. Detection is ``"bands"``' straight CPA test at the current heading
 (the world's prefilter holds). Distances m, velocities m/s, times s, angles rad CCW positive.
 """
 
@@ -141,6 +148,28 @@ def switch_boxed_sides(
     return best
 
 
+def best_of_both_when_boxed(first_clear, best_blocked, ratio, usable, committed_side):
+    """``best_blocked`` (N, 2) with the committed side's entry (``committed_side`` (N,) −1
+    right, +1 left, 0 none) replaced by the candidate of largest ``ratio`` (N, C) over both
+    sides (``usable`` (N, C)) where neither side has a clear candidate (``first_clear`` (N, 3)
+    columns 0 and 1 both −1) and that candidate's ratio is strictly above the committed side's
+    best blocked one's; a new array. Indices as in :func:`flown_sides`."""
+    best = best_blocked.copy()
+    n = best.shape[0]
+    side = np.broadcast_to(np.asarray(committed_side, dtype=float), (n,))
+    rows = np.arange(n)
+    score = np.where(usable, ratio, -np.inf)
+    top = np.argmax(score, axis=1)
+    top_score = score[rows, top]
+    boxed = (first_clear[:, 0] < 0) & (first_clear[:, 1] < 0) & usable.any(axis=1)
+    for value, col in ((-1.0, 0), (1.0, 1)):
+        b = best[:, col]
+        own = np.where(b >= 0, score[rows, np.maximum(b, 0)], -np.inf)
+        swap = boxed & (side == value) & (top_score > own)
+        best[:, col] = np.where(swap, top, b)
+    return best
+
+
 @registry.register("resolver", "bands-flown")
 class FlownBandsResolver(BandsResolver):
     """``"bands"``' open sides, the heading on a side judged as flown (module docstring)."""
@@ -164,6 +193,11 @@ class FlownBandsResolver(BandsResolver):
             False,
             doc="with switch_below: switch only when the committed side has no heading "
             "clear at once either",
+        )
+        boxed_best_both: bool = param(
+            False,
+            doc="a committed ownship with no heading clear as flown on either side flies the "
+            "best as-flown candidate of both sides, not its committed side's best",
         )
 
     def resolve(
@@ -219,6 +253,8 @@ class FlownBandsResolver(BandsResolver):
                     [(clear & (cand <= 0)).any(axis=1), (clear & (cand >= 0)).any(axis=1)], axis=1
                 )
             best = switch_boxed_sides(first, best, flown, committed_side, p.switch_below, at_once)
+        if p.boxed_best_both and committed_side is not None:
+            best = best_of_both_when_boxed(first, best, flown, usable, committed_side)
         idx = np.arange(n)
         choice = band_choice(
             first, best, lambda i: np.where(i >= 0, flown[idx, np.maximum(i, 0)], -np.inf)
