@@ -306,3 +306,72 @@ def test_boxed_best_both_head_on_intruder_offset_to_the_right():
     assert pair[0] < pair[1] < 1.0
     assert pair[0] == pytest.approx(flown[cand[0] <= 0].max())
     assert pair[1] == pytest.approx(flown.max())
+
+
+@pytest.mark.parametrize("seed", [7, 11])
+def test_boxed_margin_spans_boxed_best_both_to_fresh_ao(seed):
+    """boxed_margin: at 0 the output is boxed_best_both's, at a margin above any ratio gap it
+    is fresh:ao's (``AO``), and in between the swap is boxed_best_both's where the gain
+    exceeds the margin."""
+    vo, r, v, valid, mx = _random_scene(seed, n=400, k=8)
+    n = vo.shape[0]
+    rate = np.full(n, RATE)
+    kept = np.where(np.arange(n) % 3 == 0, 1.0, -1.0)
+    kept[np.arange(n) % 5 == 0] = 0.0
+
+    def run(**kw):
+        return FlownBandsResolver(FlownBandsResolver.Params(**AO, **kw)).resolve(
+            vo, r, v, valid, mx, turn_rate=rate, committed_side=kept
+        )
+
+    base, both = run(), run(boxed_best_both=True)
+    fields = ("heading_change", "conflict", "first_clear", "best_blocked", "min_ratio")
+    for name in fields:
+        np.testing.assert_array_equal(
+            getattr(run(boxed_best_both=True, boxed_margin=0.0), name), getattr(both, name)
+        )
+        np.testing.assert_array_equal(
+            getattr(run(boxed_best_both=True, boxed_margin=1e6), name), getattr(base, name)
+        )
+    rows = np.arange(n)
+    score = np.where(~np.isnan(base.candidates), base.min_ratio, -np.inf)
+    col = np.where(kept > 0, 1, 0)
+    changed = both.heading_change != base.heading_change
+    gain = np.full(n, -np.inf)
+    c = rows[changed]
+    gain[c] = score[c, both.best_blocked[c, col[c]]] - score[c, base.best_blocked[c, col[c]]]
+    assert changed.sum() > 5
+    margin = float(np.median(gain[changed]))
+    mid = run(boxed_best_both=True, boxed_margin=margin)
+    keep = changed & (gain > margin)
+    assert 0 < keep.sum() < changed.sum()
+    np.testing.assert_array_equal(mid.heading_change[keep], both.heading_change[keep])
+    np.testing.assert_array_equal(mid.heading_change[~keep], base.heading_change[~keep])
+
+
+def test_boxed_margin_decides_the_head_on_case():
+    """The head-on case of boxed_best_both: the left pick beats the right side's best by a
+    gain g of as-flown ratio; a margin below g still flies left, one above g keeps the
+    committed right side's best (fresh:ao's pick)."""
+    vo = np.array([[230.0, 0.0]])
+    r = np.array([[[8000.0, -500.0]]])
+    v = np.array([[[-460.0, 0.0]]])
+    valid = np.ones((1, 1), bool)
+    mx = np.array([math.radians(30.0)])
+    rate = np.array([RATE])
+    side = np.array([-1.0])
+
+    def pick(**kw):
+        out = FlownBandsResolver(FlownBandsResolver.Params(**AO, **kw)).resolve(
+            vo, r, v, valid, mx, turn_rate=rate, committed_side=side
+        )
+        assert (out.first_clear[0, :2] < 0).all()
+        b = out.best_blocked[0, 0]
+        return out.candidates[0, b], out.min_ratio[0, b]
+
+    psi_ao, ratio_ao = pick()
+    psi_bb, ratio_bb = pick(boxed_best_both=True)
+    gain = ratio_bb - ratio_ao
+    assert psi_ao <= 0.0 < psi_bb and gain > 0.0
+    assert pick(boxed_best_both=True, boxed_margin=0.5 * gain)[0] == psi_bb
+    assert pick(boxed_best_both=True, boxed_margin=1.5 * gain)[0] == psi_ao

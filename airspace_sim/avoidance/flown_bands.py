@@ -47,7 +47,10 @@ clear as flown (boxed on both sides) flies the best as-flown candidate over both
 largest as-flown minimum CPA ratio; the committed side's own best is kept on ties) instead
 of its committed side's best (:func:`best_of_both_when_boxed`); the side label is kept.
 Traced on ``fresh:ao`` (``results/loss_trace_switch_s21.txt``), every remaining dense loss
-had one aircraft boxed on both sides for 5 s or more. Detection is ``"bands"``' straight CPA test at the current heading
+had one aircraft boxed on both sides for 5 s or more. With ``boxed_margin`` (≥ 0) the best of
+both sides is taken only when its as-flown ratio beats the committed side's best by more
+than the margin (a stateless hysteresis: on the symmetric ring the boxed sides' bests differ
+little and the plain rule flips sides from step to step). Detection is ``"bands"``' straight CPA test at the current heading
 (the world's prefilter holds). Distances m, velocities m/s, times s, angles rad CCW positive.
 """
 
@@ -148,12 +151,13 @@ def switch_boxed_sides(
     return best
 
 
-def best_of_both_when_boxed(first_clear, best_blocked, ratio, usable, committed_side):
+def best_of_both_when_boxed(first_clear, best_blocked, ratio, usable, committed_side, margin=0.0):
     """``best_blocked`` (N, 2) with the committed side's entry (``committed_side`` (N,) −1
     right, +1 left, 0 none) replaced by the candidate of largest ``ratio`` (N, C) over both
     sides (``usable`` (N, C)) where neither side has a clear candidate (``first_clear`` (N, 3)
-    columns 0 and 1 both −1) and that candidate's ratio is strictly above the committed side's
-    best blocked one's; a new array. Indices as in :func:`flown_sides`."""
+    columns 0 and 1 both −1) and that candidate's ratio is above the committed side's best
+    blocked one's by more than ``margin`` (≥ 0; 0: strictly above); a new array. Indices as in
+    :func:`flown_sides`."""
     best = best_blocked.copy()
     n = best.shape[0]
     side = np.broadcast_to(np.asarray(committed_side, dtype=float), (n,))
@@ -165,7 +169,7 @@ def best_of_both_when_boxed(first_clear, best_blocked, ratio, usable, committed_
     for value, col in ((-1.0, 0), (1.0, 1)):
         b = best[:, col]
         own = np.where(b >= 0, score[rows, np.maximum(b, 0)], -np.inf)
-        swap = boxed & (side == value) & (top_score > own)
+        swap = boxed & (side == value) & (top_score > own + margin)
         best[:, col] = np.where(swap, top, b)
     return best
 
@@ -198,6 +202,12 @@ class FlownBandsResolver(BandsResolver):
             False,
             doc="a committed ownship with no heading clear as flown on either side flies the "
             "best as-flown candidate of both sides, not its committed side's best",
+        )
+        boxed_margin: float = param(
+            0.0,
+            doc="with boxed_best_both: take the best of both sides only when its as-flown "
+            "ratio beats the committed side's best by more than this (0: any gain)",
+            ge=0.0,
         )
 
     def resolve(
@@ -254,7 +264,9 @@ class FlownBandsResolver(BandsResolver):
                 )
             best = switch_boxed_sides(first, best, flown, committed_side, p.switch_below, at_once)
         if p.boxed_best_both and committed_side is not None:
-            best = best_of_both_when_boxed(first, best, flown, usable, committed_side)
+            best = best_of_both_when_boxed(
+                first, best, flown, usable, committed_side, p.boxed_margin
+            )
         idx = np.arange(n)
         choice = band_choice(
             first, best, lambda i: np.where(i >= 0, flown[idx, np.maximum(i, 0)], -np.inf)
