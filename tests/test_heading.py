@@ -243,6 +243,17 @@ def test_boundary_kernel_equals_numpy_equal_speeds():
     assert np.isnan(got[..., :4]).sum() > 0 and (~np.isnan(got[..., :4])).sum() > 0
 
 
+def _ray_scene(rng):
+    """A random root ψ, own velocity ``vo`` (50–300 m/s), tangent direction ``u`` and the
+    turned own velocity ``ro = R(ψ)·vo`` for the tangent-ray tests (libm's cos / sin)."""
+    psi = rng.uniform(-np.pi, np.pi)
+    vo = rotate(np.array([rng.uniform(50.0, 300.0), 0.0]), rng.uniform(-np.pi, np.pi))
+    u = rotate(np.array([1.0, 0.0]), rng.uniform(-np.pi, np.pi))
+    ro = np.array([np.cos(psi) * vo[0] - np.sin(psi) * vo[1], 0.0])
+    ro[1] = np.sin(psi) * vo[0] + np.cos(psi) * vo[1]
+    return psi, vo, u, ro
+
+
 def test_tangent_ray_test_is_the_reference_decision_near_its_threshold():
     # the fast test with cos / sin off by up to 5e-8 (above the angle-sum formula's error)
     # decides like λ = (v_i − R(ψ) v_o)·u > 1e-12·scale with libm's cos / sin, also for
@@ -251,11 +262,7 @@ def test_tangent_ray_test_is_the_reference_decision_near_its_threshold():
 
     rng = np.random.default_rng(9)
     for _ in range(3000):
-        psi = rng.uniform(-np.pi, np.pi)
-        vo = rotate(np.array([rng.uniform(50.0, 300.0), 0.0]), rng.uniform(-np.pi, np.pi))
-        u = rotate(np.array([1.0, 0.0]), rng.uniform(-np.pi, np.pi))
-        ro = np.array([np.cos(psi) * vo[0] - np.sin(psi) * vo[1], 0.0])
-        ro[1] = np.sin(psi) * vo[0] + np.cos(psi) * vo[1]
+        psi, vo, u, ro = _ray_scene(rng)
         scale = float(np.hypot(*vo)) * 2.0
         lam = rng.choice([0.0, 1e-12, 1e-9, 1e-7, 1e-3, 1.0]) * scale * rng.choice([-1, 1, 2])
         vi = ro + lam * u
@@ -274,11 +281,7 @@ def test_fast_ray_test_decides_only_as_the_exact_test():
     rng = np.random.default_rng(10)
     decided = 0
     for _ in range(3000):
-        psi = rng.uniform(-np.pi, np.pi)
-        vo = rotate(np.array([rng.uniform(50.0, 300.0), 0.0]), rng.uniform(-np.pi, np.pi))
-        u = rotate(np.array([1.0, 0.0]), rng.uniform(-np.pi, np.pi))
-        ro = np.array([np.cos(psi) * vo[0] - np.sin(psi) * vo[1], 0.0])
-        ro[1] = np.sin(psi) * vo[0] + np.cos(psi) * vo[1]
+        psi, vo, u, ro = _ray_scene(rng)
         sv = float(np.hypot(*vo))
         scale0 = 2.0 * sv
         lam = rng.choice([0.0, 1e-12, 1e-9, 1e-7, 1e-6, 1e-3, 1.0]) * scale0

@@ -201,33 +201,10 @@ def _sum2(x0, x1):  # pragma: no cover - compiled
 _RAY_GUARD = 1e-6
 
 
-@njit(cache=True, error_model="numpy")
-def _on_tangent_ray(psi, cos_psi, sin_psi, vox, voy, vix, viy, ux, uy, scale):  # pragma: no cover
-    """The tangent-ray test of :func:`tangent_heading_changes` (``λ > 1e-12·scale``) for the
-    root ``psi`` of ``a cos ψ + b sin ψ = c`` (as :func:`_solve_cos_sin`), decided from
-    ``cos_psi``, ``sin_psi``: its cos and sin from the angle-sum formula (no libm call), within ~2e-8 of ``cos(psi)``,
-    ``sin(psi)``. Only a λ within :data:`_RAY_GUARD`·scale of the threshold (relative
-    speed ≲ 1e-6·scale at the root) is recomputed with ``cos(psi)``, ``sin(psi)`` as the
-    numpy reference does, so the decision is always the reference's."""
-    threshold = 1e-12 * scale
-    guard = _RAY_GUARD * scale
-    wx = vix - (cos_psi * vox - sin_psi * voy)
-    wy = viy - (sin_psi * vox + cos_psi * voy)
-    lam = _sum2(wx * ux, wy * uy)
-    if lam > threshold + guard:
-        return True
-    if lam < threshold - guard:
-        return False
-    cp, sp = np.cos(psi), np.sin(psi)
-    wx = vix - (cp * vox - sp * voy)
-    wy = viy - (sp * vox + cp * voy)
-    return _sum2(wx * ux, wy * uy) > threshold
-
-
 @njit(inline="always", error_model="numpy")
 def _ray_fast(cos_psi, sin_psi, vox, voy, vix, viy, ux, uy, approx):  # pragma: no cover
     """:func:`_on_tangent_ray`'s fast test without the root itself: 1 (on the ray), 0 (not)
-    or 2 (undecided: call :func:`_on_tangent_ray` with the root and the exact scale).
+    or 2 (undecided: :func:`_on_tangent_ray` with the root and the exact scale decides).
     ``cos_psi``, ``sin_psi`` within ~3·10⁻⁸ of the root's cos and sin (the angle-sum
     formula, also with ``√(a² + b²)`` for ``hypot(a, b)``); ``approx`` the scale ``|v_o| +
     |v_i|`` within a few ulp (from ``sqrt``; inf or NaN where the squares overflow: then
@@ -244,6 +221,24 @@ def _ray_fast(cos_psi, sin_psi, vox, voy, vix, viy, ux, uy, approx):  # pragma: 
     if lam < threshold - guard:
         return 0
     return 2
+
+
+@njit(cache=True, error_model="numpy")
+def _on_tangent_ray(psi, cos_psi, sin_psi, vox, voy, vix, viy, ux, uy, scale):  # pragma: no cover
+    """The tangent-ray test of :func:`tangent_heading_changes` (``λ > 1e-12·scale``) for the
+    root ``psi`` of ``a cos ψ + b sin ψ = c`` (as :func:`_solve_cos_sin`), decided from
+    ``cos_psi``, ``sin_psi``: its cos and sin from the angle-sum formula (no libm call),
+    within ~2e-8 of ``cos(psi)``, ``sin(psi)`` (:func:`_ray_fast`). Only a λ within
+    :data:`_RAY_GUARD`·scale of the threshold (relative speed ≲ 1e-6·scale at the root) is
+    recomputed with ``cos(psi)``, ``sin(psi)`` as the numpy reference does, so the decision
+    is always the reference's."""
+    fast = _ray_fast(cos_psi, sin_psi, vox, voy, vix, viy, ux, uy, scale)
+    if fast != 2:
+        return fast == 1
+    cp, sp = np.cos(psi), np.sin(psi)
+    wx = vix - (cp * vox - sp * voy)
+    wy = viy - (sp * vox + cp * voy)
+    return _sum2(wx * ux, wy * uy) > 1e-12 * scale
 
 
 #: guard band of the search-window test, on the cosine of a root (see :func:`_pair_roots`);
