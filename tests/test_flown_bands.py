@@ -27,6 +27,50 @@ def _random_scene(seed, n=120, k=5):
     return vo, r, vi - vo[:, None], valid, np.full(n, math.pi / 2)
 
 
+def _committed_sides(n):
+    """(n,) committed sides for random-scene tests: left on every third row, fresh (0) on
+    every fifth, right elsewhere."""
+    kept = np.where(np.arange(n) % 3 == 0, 1.0, -1.0)
+    kept[np.arange(n) % 5 == 0] = 0.0
+    return kept
+
+
+def _head_on(ahead_m, right_m):
+    """One ownship east at 230 m/s committed right, a head-on intruder (460 m/s closing)
+    ``ahead_m`` ahead and ``right_m`` to the right, turn limit ±30°, turn rate 3°/s:
+    ``(vo, r, v, valid, mx, rate, side)``."""
+    return (
+        np.array([[230.0, 0.0]]),
+        np.array([[[ahead_m, -right_m]]]),
+        np.array([[[-460.0, 0.0]]]),
+        np.ones((1, 1), bool),
+        np.array([math.radians(30.0)]),
+        np.array([RATE]),
+        np.array([-1.0]),
+    )
+
+
+def _policy_pick(params, scene):
+    """The resolver's output on a :func:`_head_on` scene and the heading change and side
+    the CDA policy (right-of-way preference) flies from it: ``(out, psi (1,), side (1,))``."""
+    from airspace_sim.world.policy import commit_reference
+
+    vo, r, v, valid, mx, rate, side = scene
+    out = FlownBandsResolver(params).resolve(
+        vo, r, v, valid, mx, turn_rate=rate, committed_side=side
+    )
+    psi, new_side = commit_reference(
+        "right",
+        out.heading_change,
+        out.conflict,
+        side,
+        out.candidates,
+        out.first_clear,
+        out.best_blocked,
+    )
+    return out, psi, new_side
+
+
 def test_registered():
     assert registry.get("resolver", "bands-flown") is FlownBandsResolver
 
@@ -141,8 +185,7 @@ def test_switch_below_sends_a_boxed_committed_ownship_to_the_other_sides_clear_h
     vo, r, v, valid, mx = _random_scene(5, n=300)
     n = vo.shape[0]
     rate = np.full(n, RATE)
-    kept = np.where(np.arange(n) % 3 == 0, 1.0, -1.0)
-    kept[np.arange(n) % 5 == 0] = 0.0
+    kept = _committed_sides(n)
     p = dict(lookahead_s=45.0, fresh_sides_only=True)
     base = FlownBandsResolver(FlownBandsResolver.Params(**p)).resolve(
         vo, r, v, valid, mx, turn_rate=rate, committed_side=kept
@@ -186,31 +229,13 @@ def test_switch_below_head_on_intruder_offset_to_the_right():
     ~30 s to the crossing, minus the 1 km offset), while a left turn clears it. Without the
     switch the CDA policy flies the right side's best blocked heading; with it, the left
     side's first clear one, which is clear as flown."""
-    from airspace_sim.world.policy import commit_reference
-
-    vo = np.array([[230.0, 0.0]])
-    r = np.array([[[15000.0, -1000.0]]])
-    v = np.array([[[-460.0, 0.0]]])
-    valid = np.ones((1, 1), bool)
-    mx = np.array([math.radians(30.0)])
-    rate = np.array([RATE])
-    side = np.array([-1.0])
+    scene = _head_on(15000.0, 1000.0)
+    vo, r, v, valid, mx, rate, side = scene
     picks = {}
     for below in (0.0, 1.0):
-        res = FlownBandsResolver(
-            FlownBandsResolver.Params(fresh_sides_only=True, switch_below=below)
-        )
-        out = res.resolve(vo, r, v, valid, mx, turn_rate=rate, committed_side=side)
+        params = FlownBandsResolver.Params(fresh_sides_only=True, switch_below=below)
+        out, psi, new_side = _policy_pick(params, scene)
         assert out.first_clear[0, 0] < 0 <= out.first_clear[0, 1]  # right boxed, left clear
-        psi, new_side = commit_reference(
-            "right",
-            out.heading_change,
-            out.conflict,
-            side,
-            out.candidates,
-            out.first_clear,
-            out.best_blocked,
-        )
         picks[below] = psi[0]
         assert new_side[0] == -1.0
     assert picks[0.0] <= 0.0
@@ -232,8 +257,7 @@ def test_boxed_best_both_is_fresh_ao_except_where_boxed_on_both_sides():
     vo, r, v, valid, mx = _random_scene(7, n=400, k=8)
     n = vo.shape[0]
     rate = np.full(n, RATE)
-    kept = np.where(np.arange(n) % 3 == 0, 1.0, -1.0)
-    kept[np.arange(n) % 5 == 0] = 0.0
+    kept = _committed_sides(n)
     base = FlownBandsResolver(FlownBandsResolver.Params(**AO)).resolve(
         vo, r, v, valid, mx, turn_rate=rate, committed_side=kept
     )
@@ -270,31 +294,13 @@ def test_boxed_best_both_head_on_intruder_offset_to_the_right():
     (boxed on both sides as flown), but a left turn opens the miss further than any right
     one. fresh:ao keeps the right side's best; with boxed_best_both the policy flies the
     left heading of largest as-flown ratio, still committed right."""
-    from airspace_sim.world.policy import commit_reference
-
-    vo = np.array([[230.0, 0.0]])
-    r = np.array([[[8000.0, -500.0]]])
-    v = np.array([[[-460.0, 0.0]]])
-    valid = np.ones((1, 1), bool)
-    mx = np.array([math.radians(30.0)])
-    rate = np.array([RATE])
-    side = np.array([-1.0])
+    scene = _head_on(8000.0, 500.0)
+    vo, r, v, valid, mx, rate, side = scene
     picks = {}
     for both in (False, True):
         params = FlownBandsResolver.Params(boxed_best_both=both, **AO)
-        out = FlownBandsResolver(params).resolve(
-            vo, r, v, valid, mx, turn_rate=rate, committed_side=side
-        )
+        out, psi, new_side = _policy_pick(params, scene)
         assert (out.first_clear[0, :2] < 0).all()  # boxed on both sides
-        psi, new_side = commit_reference(
-            "right",
-            out.heading_change,
-            out.conflict,
-            side,
-            out.candidates,
-            out.first_clear,
-            out.best_blocked,
-        )
         picks[both] = psi[0]
         assert new_side[0] == -1.0
     assert picks[False] <= 0.0 < picks[True]
@@ -316,8 +322,7 @@ def test_boxed_margin_spans_boxed_best_both_to_fresh_ao(seed):
     vo, r, v, valid, mx = _random_scene(seed, n=400, k=8)
     n = vo.shape[0]
     rate = np.full(n, RATE)
-    kept = np.where(np.arange(n) % 3 == 0, 1.0, -1.0)
-    kept[np.arange(n) % 5 == 0] = 0.0
+    kept = _committed_sides(n)
 
     def run(**kw):
         return FlownBandsResolver(FlownBandsResolver.Params(**AO, **kw)).resolve(
@@ -353,18 +358,10 @@ def test_boxed_margin_decides_the_head_on_case():
     """The head-on case of boxed_best_both: the left pick beats the right side's best by a
     gain g of as-flown ratio; a margin below g still flies left, one above g keeps the
     committed right side's best (fresh:ao's pick)."""
-    vo = np.array([[230.0, 0.0]])
-    r = np.array([[[8000.0, -500.0]]])
-    v = np.array([[[-460.0, 0.0]]])
-    valid = np.ones((1, 1), bool)
-    mx = np.array([math.radians(30.0)])
-    rate = np.array([RATE])
-    side = np.array([-1.0])
+    scene = _head_on(8000.0, 500.0)
 
     def pick(**kw):
-        out = FlownBandsResolver(FlownBandsResolver.Params(**AO, **kw)).resolve(
-            vo, r, v, valid, mx, turn_rate=rate, committed_side=side
-        )
+        out = _policy_pick(FlownBandsResolver.Params(**AO, **kw), scene)[0]
         assert (out.first_clear[0, :2] < 0).all()
         b = out.best_blocked[0, 0]
         return out.candidates[0, b], out.min_ratio[0, b]

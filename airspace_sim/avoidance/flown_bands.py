@@ -77,6 +77,18 @@ from airspace_sim.parts import param
 DEFAULT_TURN_RATE = math.radians(3.0)
 
 
+def side_masks(candidates):
+    """The candidates (N, C) rad on each side: ``(ψ ≤ 0, ψ ≥ 0, ψ < 0)``, (N, C) bool each
+    (the columns of ``first_clear``; NaN on none)."""
+    return candidates <= 0, candidates >= 0, candidates < 0
+
+
+def open_at_once(candidates, clear):
+    """(N, 3) bool: the sides of :func:`side_masks` with a candidate clear at once
+    (``clear`` (N, C) bool)."""
+    return np.stack([(clear & mask).any(axis=1) for mask in side_masks(candidates)], axis=1)
+
+
 def flown_sides(candidates, clear, flown, wanted):
     """``(first_clear (N, 3), best_blocked (N, 2))`` of the module docstring's choice.
 
@@ -90,8 +102,9 @@ def flown_sides(candidates, clear, flown, wanted):
     good = clear & (flown >= 1.0 - CLEAR_TOLERANCE)
     first = np.full((n, 3), -1, dtype=np.int64)
     best = np.full((n, 2), -1, dtype=np.int64)
-    for col, mask in enumerate((candidates <= 0, candidates >= 0, candidates < 0)):
-        open_ = (clear & mask).any(axis=1)
+    opened = open_at_once(candidates, clear)
+    for col, mask in enumerate(side_masks(candidates)):
+        open_ = opened[:, col]
         fine = good & mask
         top = np.argmax(np.where(clear & mask, flown, -np.inf), axis=1)
         first[:, col] = np.where(
@@ -117,10 +130,11 @@ def fresh_flown_sides(candidates, clear, flown, wanted, committed_side=None):
     fresh = np.ones(n, dtype=bool)
     if committed_side is not None:
         fresh = np.broadcast_to(np.asarray(committed_side, dtype=float), (n,)) == 0
-    for col, mask in enumerate((candidates <= 0, candidates >= 0, candidates < 0)):
+    opened = open_at_once(candidates, clear)
+    for col, mask in enumerate(side_masks(candidates)):
         side = mask & usable
         top = np.argmax(np.where(side, flown, -np.inf), axis=1)
-        lift = fresh & (first[:, col] < 0) & (clear & mask).any(axis=1)
+        lift = fresh & (first[:, col] < 0) & opened[:, col]
         first[:, col] = np.where(lift, top, first[:, col])
         if col < 2:
             best[:, col] = np.where(lift, -1, best[:, col])
@@ -257,11 +271,7 @@ class FlownBandsResolver(BandsResolver):
         else:
             first, best = flown_sides(cand, clear, flown, wanted)
         if p.switch_below > 0.0 and committed_side is not None:
-            at_once = None
-            if p.switch_blocked_at_once:
-                at_once = np.stack(
-                    [(clear & (cand <= 0)).any(axis=1), (clear & (cand >= 0)).any(axis=1)], axis=1
-                )
+            at_once = open_at_once(cand, clear)[:, :2] if p.switch_blocked_at_once else None
             best = switch_boxed_sides(first, best, flown, committed_side, p.switch_below, at_once)
         if p.boxed_best_both and committed_side is not None:
             best = best_of_both_when_boxed(
