@@ -372,3 +372,106 @@ def test_boxed_margin_decides_the_head_on_case():
     assert psi_ao <= 0.0 < psi_bb and gain > 0.0
     assert pick(boxed_best_both=True, boxed_margin=0.5 * gain)[0] == psi_bb
     assert pick(boxed_best_both=True, boxed_margin=1.5 * gain)[0] == psi_ao
+
+
+def test_boxed_horizon_at_the_lookahead_is_boxed_best_both():
+    """boxed_horizon_s equal to the look-ahead ranks by the same as-flown ratio (capped at 1,
+    and a boxed row has none clear), so the output is boxed_best_both's, array for array."""
+    vo, r, v, valid, mx = _random_scene(7, n=400, k=8)
+    n = vo.shape[0]
+    rate, kept = np.full(n, RATE), _committed_sides(n)
+
+    def run(**kw):
+        params = FlownBandsResolver.Params(boxed_best_both=True, boxed_margin=0.1, **AO, **kw)
+        return FlownBandsResolver(params).resolve(
+            vo, r, v, valid, mx, turn_rate=rate, committed_side=kept
+        )
+
+    plain, same = run(), run(boxed_horizon_s=120.0)
+    for name in ("heading_change", "conflict", "first_clear", "best_blocked", "min_ratio"):
+        np.testing.assert_array_equal(getattr(same, name), getattr(plain, name))
+
+
+@pytest.mark.parametrize("seed", [7, 11])
+def test_boxed_horizon_ranks_by_the_short_horizon_first(seed):
+    """boxed_horizon_s = H: a committed ownship boxed on both sides flies the candidate of
+    largest full as-flown ratio among those of largest as-flown ratio over H (capped at 1,
+    from an independent cpa_min_ratio_turning call over every row) when it beats the
+    committed side's best over H, or ties over H and beats over the look-ahead, by more than
+    the margin; every other row is boxed_best_both's."""
+    H, margin, tol = 20.0, 0.05, 1e-9
+    vo, r, v, valid, mx = _random_scene(seed, n=400, k=8)
+    n = vo.shape[0]
+    rate, kept = np.full(n, RATE), _committed_sides(n)
+
+    def run(**kw):
+        params = FlownBandsResolver.Params(boxed_best_both=True, boxed_margin=margin, **AO, **kw)
+        return FlownBandsResolver(params).resolve(
+            vo, r, v, valid, mx, turn_rate=rate, committed_side=kept
+        )
+
+    plain, out = run(), run(boxed_horizon_s=H)
+    np.testing.assert_array_equal(out.first_clear, plain.first_clear)
+    np.testing.assert_array_equal(out.min_ratio, plain.min_ratio)
+    usable = ~np.isnan(plain.candidates)
+    safe = np.where(usable, plain.candidates, 0.0)
+    short = np.minimum(cpa_min_ratio_turning(vo, r, v, valid, safe, 3300.0, H, rate), 1.0)
+    short = np.where(usable, short, -np.inf)
+    full = np.where(usable, plain.min_ratio, -np.inf)
+    boxed = (plain.first_clear[:, 0] < 0) & (plain.first_clear[:, 1] < 0) & (kept != 0)
+    expected = plain.heading_change.copy()
+    # the committed side's own best is fresh:ao's (before any both-sides swap)
+    own_best = (
+        FlownBandsResolver(FlownBandsResolver.Params(**AO))
+        .resolve(vo, r, v, valid, mx, turn_rate=rate, committed_side=kept)
+        .best_blocked
+    )
+    for i in np.flatnonzero(boxed):
+        near = short[i] >= short[i].max() - tol
+        top = int(np.argmax(np.where(near, full[i], -np.inf)))
+        own = own_best[i, 0 if kept[i] < 0 else 1]
+        assert own >= 0
+        beats = short[i, top] > short[i, own] + margin or (
+            short[i, top] >= short[i, own] - tol and full[i, top] > full[i, own] + margin
+        )
+        expected[i] = plain.candidates[i, top if beats else own]
+    np.testing.assert_array_equal(out.heading_change, expected)
+    changed = out.heading_change != plain.heading_change
+    assert changed.sum() >= 3
+    assert boxed[changed].all()
+
+
+def test_boxed_horizon_clears_the_imminent_intruder_first():
+    """Ownship east committed right, intruder A head-on 8 km ahead and 500 m to the right
+    (~17 s to the crossing), intruder B 10 km ahead and 6 km to the left heading south-west:
+    boxed on both sides as flown. Over the look-ahead the right side's best (−30°) beats the
+    left side's (B crosses a left turn later), so boxed_best_both keeps right; over 20 s
+    only A counts and a left turn opens its miss by far, so boxed_horizon_s = 20 turns left."""
+    vo = np.array([[230.0, 0.0]])
+    vb = 230.0 * np.array([math.cos(math.radians(-135.0)), math.sin(math.radians(-135.0))])
+    r = np.array([[[8000.0, -500.0], [10000.0, 6000.0]]])
+    v = np.array([[[-460.0, 0.0], vb - vo[0]]])
+    scene = (
+        vo,
+        r,
+        v,
+        np.ones((1, 2), bool),
+        np.array([math.radians(30.0)]),
+        np.array([RATE]),
+        np.array([-1.0]),
+    )
+    picks = {}
+    for H in (0.0, 20.0):
+        params = FlownBandsResolver.Params(
+            boxed_best_both=True, boxed_margin=0.1, boxed_horizon_s=H, **AO
+        )
+        out, psi, side = _policy_pick(params, scene)
+        assert (out.first_clear[0, :2] < 0).all() and side[0] == -1.0
+        picks[H] = psi[0]
+    assert picks[0.0] <= 0.0 < picks[20.0]
+    pair = np.array([[picks[0.0], picks[20.0]]])
+    rate = np.array([RATE])
+    over_h = cpa_min_ratio_turning(vo, r, v, scene[3], pair, 3300.0, 20.0, rate)[0]
+    over_t = cpa_min_ratio_turning(vo, r, v, scene[3], pair, 3300.0, 120.0, rate)[0]
+    assert over_h[1] > over_h[0] + 0.1  # the left turn clears A further within 20 s
+    assert over_t[0] > over_t[1]  # but over the look-ahead the right one is better

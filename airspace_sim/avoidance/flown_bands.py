@@ -165,25 +165,53 @@ def switch_boxed_sides(
     return best
 
 
-def best_of_both_when_boxed(first_clear, best_blocked, ratio, usable, committed_side, margin=0.0):
+def boxed_rows(first_clear, usable, committed_side):
+    """(N,) bool: committed ownships (``committed_side`` (N,) ≠ 0) with no clear candidate on
+    either side (``first_clear`` (N, 3) columns 0 and 1 both −1) and some usable one
+    (``usable`` (N, C))."""
+    side = np.broadcast_to(np.asarray(committed_side, dtype=float), (first_clear.shape[0],))
+    boxed = (first_clear[:, 0] < 0) & (first_clear[:, 1] < 0) & usable.any(axis=1)
+    return boxed & (side != 0)
+
+
+def best_of_both_when_boxed(
+    first_clear, best_blocked, ratio, usable, committed_side, margin=0.0, imminent=None
+):
     """``best_blocked`` (N, 2) with the committed side's entry (``committed_side`` (N,) −1
     right, +1 left, 0 none) replaced by the candidate of largest ``ratio`` (N, C) over both
     sides (``usable`` (N, C)) where neither side has a clear candidate (``first_clear`` (N, 3)
     columns 0 and 1 both −1) and that candidate's ratio is above the committed side's best
     blocked one's by more than ``margin`` (≥ 0; 0: strictly above); a new array. Indices as in
-    :func:`flown_sides`."""
+    :func:`flown_sides`.
+
+    With ``imminent`` (N, C) (the as-flown ratio over a short horizon) candidates are ranked
+    first by ``min(imminent, 1)``, then by ``ratio``: the top one is the candidate of largest
+    ``ratio`` among those within ``CLEAR_TOLERANCE`` of the largest ``min(imminent, 1)``, and
+    it replaces the committed side's best when its ``min(imminent, 1)`` beats that one's by
+    more than ``margin``, or ties it and its ``ratio`` beats by more than ``margin``. Where no
+    candidate is short of 1 over the short horizon this is the rule without ``imminent``."""
     best = best_blocked.copy()
     n = best.shape[0]
     side = np.broadcast_to(np.asarray(committed_side, dtype=float), (n,))
     rows = np.arange(n)
     score = np.where(usable, ratio, -np.inf)
-    top = np.argmax(score, axis=1)
-    top_score = score[rows, top]
-    boxed = (first_clear[:, 0] < 0) & (first_clear[:, 1] < 0) & usable.any(axis=1)
+    if imminent is None:
+        first_key = np.where(usable, 1.0, -np.inf)
+    else:
+        first_key = np.where(usable, np.minimum(imminent, 1.0), -np.inf)
+    near = first_key >= first_key.max(axis=1, keepdims=True) - CLEAR_TOLERANCE
+    top = np.argmax(np.where(near, score, -np.inf), axis=1)
+    top_first, top_score = first_key[rows, top], score[rows, top]
+    boxed = boxed_rows(first_clear, usable, committed_side)
     for value, col in ((-1.0, 0), (1.0, 1)):
         b = best[:, col]
-        own = np.where(b >= 0, score[rows, np.maximum(b, 0)], -np.inf)
-        swap = boxed & (side == value) & (top_score > own + margin)
+        at = np.maximum(b, 0)
+        own_first = np.where(b >= 0, first_key[rows, at], -np.inf)
+        own = np.where(b >= 0, score[rows, at], -np.inf)
+        beats = (top_first > own_first + margin) | (
+            (top_first >= own_first - CLEAR_TOLERANCE) & (top_score > own + margin)
+        )
+        swap = boxed & (side == value) & beats
         best[:, col] = np.where(swap, top, b)
     return best
 
@@ -221,6 +249,13 @@ class FlownBandsResolver(BandsResolver):
             0.0,
             doc="with boxed_best_both: take the best of both sides only when its as-flown "
             "ratio beats the committed side's best by more than this (0: any gain)",
+            ge=0.0,
+        )
+        boxed_horizon_s: float = param(
+            0.0,
+            doc="with boxed_best_both: rank the candidates of a boxed ownship first by their "
+            "as-flown ratio over this many seconds (capped at 1), then over the look-ahead "
+            "(0: over the look-ahead only)",
             ge=0.0,
         )
 
@@ -274,8 +309,21 @@ class FlownBandsResolver(BandsResolver):
             at_once = open_at_once(cand, clear)[:, :2] if p.switch_blocked_at_once else None
             best = switch_boxed_sides(first, best, flown, committed_side, p.switch_below, at_once)
         if p.boxed_best_both and committed_side is not None:
+            imminent = None
+            if p.boxed_horizon_s > 0.0:
+                imminent = self._imminent(
+                    vo,
+                    r,
+                    v,
+                    valid,
+                    safe,
+                    usable,
+                    radius,
+                    turn_rate,
+                    boxed_rows(first, usable, committed_side),
+                )
             best = best_of_both_when_boxed(
-                first, best, flown, usable, committed_side, p.boxed_margin
+                first, best, flown, usable, committed_side, p.boxed_margin, imminent
             )
         idx = np.arange(n)
         choice = band_choice(
@@ -290,3 +338,25 @@ class FlownBandsResolver(BandsResolver):
             first_clear=first,
             best_blocked=best,
         )
+
+    def _imminent(self, vo, r, v, valid, safe, usable, radius, turn_rate, boxed):
+        """(N, C) as-flown minimum CPA ratio over ``boxed_horizon_s`` on the ``boxed`` (N,)
+        rows (+inf elsewhere: no candidate is short there, so the rule is the plain one;
+        −inf where unused)."""
+        n = vo.shape[0]
+        out = np.full(safe.shape, np.inf)
+        rows = np.flatnonzero(boxed)
+        if rows.size and r.shape[1] > 0:
+            rate = DEFAULT_TURN_RATE if turn_rate is None else turn_rate
+            rate_rows = np.broadcast_to(np.asarray(rate, dtype=float), (n,))[rows]
+            out[rows] = cpa_min_ratio_turning(
+                vo[rows],
+                r[rows],
+                v[rows],
+                valid[rows],
+                safe[rows],
+                radius,
+                self.params.boxed_horizon_s,
+                rate_rows,
+            )
+        return np.where(usable, out, -np.inf)
