@@ -254,7 +254,7 @@ def test_overrides_apply_before_validation():
     )
     assert sc.traffic.count == 64 and sc.traffic.radius == 70000.0
     assert isinstance(sc.traffic.radius, float)
-    assert sc.resolver.params == {"left_penalty": 0.1}
+    assert sc.resolver.params == {**load("ring").resolver.params, "left_penalty": 0.1}
     assert sc.duration == 10.0
     assert len(build_aircraft(sc, np.random.default_rng(0))) == 64
     # the file itself is untouched
@@ -675,3 +675,20 @@ def test_recorded_rules_are_the_loaders(recorded, expected):
     ok = from_dict({"name": "r", "recorded": {"file": "no-such.csv", "max_altitude_ft": 5000.0}})
     with pytest.raises(UserError, match=r"recorded\.file: no such file"):
         load_flights(ok.recorded)
+
+
+def test_a_set_kind_starts_from_the_new_kinds_defaults(tmp_path):
+    """--set resolver.kind=... drops the file's resolver.params (written for the file's
+    kind); params set by the overrides still apply; the same kind keeps them."""
+    path = tmp_path / "s.toml"
+    path.write_text(
+        '[resolver]\nkind = "bands-flown"\n[resolver.params]\nboxed_best_both = true\n'
+        '[traffic]\npattern = "ring"\ncount = 4\nradius = 20000.0\n'
+    )
+    assert load(path).resolver.params == {"boxed_best_both": True}
+    assert load(path, ['resolver.kind="bands-flown"']).resolver.params == {"boxed_best_both": True}
+    assert load(path, ['resolver.kind="bands"']).resolver.params == {}
+    both = load(path, ["resolver.params.left_penalty=0.1", 'resolver.kind="bands"'])
+    assert both.resolver.kind == "bands" and both.resolver.params == {"left_penalty": 0.1}
+    with pytest.raises(UserError, match="boxed_best_both: unknown key"):
+        load(path, ["resolver.params={boxed_best_both = true}", 'resolver.kind="bands"'])

@@ -24,6 +24,7 @@ dotted key and the value::
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import os
 import re
@@ -572,7 +573,6 @@ def from_dict(
     nothing to simulate.
     Without it such a scenario is a configuration code builds (defaults, a resolver's
     parameters)."""
-    import copy
 
     if runnable and not data:
         raise UserError(
@@ -582,6 +582,8 @@ def from_dict(
         data = copy.deepcopy(data)
     except RecursionError:  # a dict built in Python; a file's nesting is caught by parse_toml
         raise UserError(f"{source}: values nested too deeply") from None
+    overrides = [overrides] if isinstance(overrides, str) else list(overrides)
+    _drop_params_of_replaced_kinds(data, overrides)
     set_paths = apply_overrides(data, overrides)
     if name is not None:
         data.setdefault("name", name)
@@ -598,6 +600,27 @@ def from_dict(
             "[traffic] with a count or a [recorded] file), got none: nothing to simulate"
         )
     return sc
+
+
+#: the scenario tables whose ``params`` belong to their ``kind``
+PARTS_WITH_PARAMS = ("resolver", "sensor", "tracker")
+
+
+def _kind_of(data: dict, part: str):
+    table = data.get(part)
+    return table.get("kind") if isinstance(table, dict) else None
+
+
+def _drop_params_of_replaced_kinds(data: dict, overrides: list[str]) -> None:
+    """Where ``overrides`` change a part's kind (``--set resolver.kind=...``), remove the
+    file's ``params`` of that part from ``data`` (in place): they were written for the file's
+    kind (a ``bands-flown`` table would be refused by ``bands`` as unknown keys), so the new
+    kind starts from its defaults plus any ``PART.params`` the overrides set."""
+    trial = copy.deepcopy(data)
+    apply_overrides(trial, overrides)
+    for part in PARTS_WITH_PARAMS:
+        if _kind_of(trial, part) != _kind_of(data, part) and isinstance(data.get(part), dict):
+            data[part].pop("params", None)
 
 
 def _where(exc: Invalid, source: str, set_paths: list[str]) -> str:

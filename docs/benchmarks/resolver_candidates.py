@@ -35,8 +35,8 @@ def scenario(case, kind, policy=()):
     knobs = {k: tomllib.loads(f"v = {v}")["v"] for k, _, v in (kv.partition("=") for kv in policy)}
     parts = case.split(":")
     sc = ring_scenario(int(parts[1])) if parts[0] == "ring" else load("dense_random")
-    base = dict(sc.resolver.params)
-    spec = dataclasses.replace(sc.resolver, kind=name, params={**base, **params}, **knobs)
+    # a kind's label is the whole of its params: the scenario file's own are not inherited
+    spec = dataclasses.replace(sc.resolver, kind=name, params=params, **knobs)
     return dataclasses.replace(sc, resolver=spec), seeds_of(parts[-1])
 
 
