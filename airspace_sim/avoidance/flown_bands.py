@@ -55,7 +55,9 @@ the boxed ownship ranks candidates first by their as-flown ratio over H (capped 
 over the look-ahead: traced on the dense losses of that rule (``docs/resolvers.md``, seventh
 part), the pair held ψ ≈ 0 at a ratio ≈ 0.9 because a third aircraft capped the left turn
 that cleared the imminent intruder, and the full look-ahead ratio cannot tell a conflict 15 s
-away from one 90 s away. Detection is ``"bands"``' straight CPA test at the current heading
+away from one 90 s away. Only candidates whose full ratio is within ``boxed_horizon_guard`` of
+the committed side's best take part: unguarded, on a tight ring everyone boxed flew on ahead
+(clear for H, then at a ratio near 0). Detection is ``"bands"``' straight CPA test at the current heading
 (the world's prefilter holds). Distances m, velocities m/s, times s, angles rad CCW positive.
 """
 
@@ -180,7 +182,7 @@ def boxed_rows(first_clear, usable, committed_side):
 
 
 def best_of_both_when_boxed(
-    first_clear, best_blocked, ratio, usable, committed_side, margin=0.0, imminent=None
+    first_clear, best_blocked, ratio, usable, committed_side, margin=0.0, imminent=None, guard=0.0
 ):
     """``best_blocked`` (N, 2) with the committed side's entry (``committed_side`` (N,) −1
     right, +1 left, 0 none) replaced by the candidate of largest ``ratio`` (N, C) over both
@@ -190,11 +192,13 @@ def best_of_both_when_boxed(
     :func:`flown_sides`.
 
     With ``imminent`` (N, C) (the as-flown ratio over a short horizon) candidates are ranked
-    first by ``min(imminent, 1)``, then by ``ratio``: the top one is the candidate of largest
-    ``ratio`` among those within ``CLEAR_TOLERANCE`` of the largest ``min(imminent, 1)``, and
-    it replaces the committed side's best when its ``min(imminent, 1)`` beats that one's by
-    more than ``margin``, or ties it and its ``ratio`` beats by more than ``margin``. Where no
-    candidate is short of 1 over the short horizon this is the rule without ``imminent``."""
+    first by ``min(imminent, 1)``, then by ``ratio``, among those whose ``ratio`` is at least
+    the committed side's best's minus ``guard`` (≥ 0; clear for the short horizon and then far
+    worse is no escape): the top one is the candidate of largest ``ratio`` among those within
+    ``CLEAR_TOLERANCE`` of the largest ``min(imminent, 1)``, and it replaces the committed
+    side's best when its ``min(imminent, 1)`` beats that one's by more than ``margin``, or ties
+    it and its ``ratio`` beats by more than ``margin``. Where no candidate is short of 1 over
+    the short horizon this is the rule without ``imminent``."""
     best = best_blocked.copy()
     n = best.shape[0]
     side = np.broadcast_to(np.asarray(committed_side, dtype=float), (n,))
@@ -204,15 +208,20 @@ def best_of_both_when_boxed(
         first_key = np.where(usable, 1.0, -np.inf)
     else:
         first_key = np.where(usable, np.minimum(imminent, 1.0), -np.inf)
-    near = first_key >= first_key.max(axis=1, keepdims=True) - CLEAR_TOLERANCE
-    top = np.argmax(np.where(near, score, -np.inf), axis=1)
-    top_first, top_score = first_key[rows, top], score[rows, top]
     boxed = boxed_rows(first_clear, usable, committed_side)
     for value, col in ((-1.0, 0), (1.0, 1)):
         b = best[:, col]
         at = np.maximum(b, 0)
         own_first = np.where(b >= 0, first_key[rows, at], -np.inf)
         own = np.where(b >= 0, score[rows, at], -np.inf)
+        key = (
+            first_key
+            if imminent is None
+            else np.where(score >= own[:, None] - guard, first_key, -np.inf)
+        )
+        near = key >= key.max(axis=1, keepdims=True) - CLEAR_TOLERANCE
+        top = np.argmax(np.where(near, score, -np.inf), axis=1)
+        top_first, top_score = first_key[rows, top], score[rows, top]
         beats = (top_first > own_first + margin) | (
             (top_first >= own_first - CLEAR_TOLERANCE) & (top_score > own + margin)
         )
@@ -261,6 +270,12 @@ class FlownBandsResolver(BandsResolver):
             doc="with boxed_best_both: rank the candidates of a boxed ownship first by their "
             "as-flown ratio over this many seconds (capped at 1), then over the look-ahead "
             "(0: over the look-ahead only)",
+            ge=0.0,
+        )
+        boxed_horizon_guard: float = param(
+            0.1,
+            doc="with boxed_horizon_s: rank over the short horizon only the candidates whose "
+            "look-ahead ratio is at most this below the committed side's best",
             ge=0.0,
         )
 
@@ -328,7 +343,14 @@ class FlownBandsResolver(BandsResolver):
                     boxed_rows(first, usable, committed_side),
                 )
             best = best_of_both_when_boxed(
-                first, best, flown, usable, committed_side, p.boxed_margin, imminent
+                first,
+                best,
+                flown,
+                usable,
+                committed_side,
+                p.boxed_margin,
+                imminent,
+                p.boxed_horizon_guard,
             )
         idx = np.arange(n)
         choice = band_choice(

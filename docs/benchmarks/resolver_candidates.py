@@ -27,14 +27,19 @@ def seeds_of(text):
     return list(range(int(a), int(b) + 1)) if b else [int(a)]
 
 
-def scenario(case, kind, policy=()):
+def scenario(case, kind, policy=(), overrides=()):
     name, params = kind.split(":")[0], {}
     for kv in kind.split(":")[1:]:
         k, v = kv.split("=")
         params[k] = tomllib.loads(f"v = {v}")["v"]
     knobs = {k: tomllib.loads(f"v = {v}")["v"] for k, _, v in (kv.partition("=") for kv in policy)}
     parts = case.split(":")
-    sc = ring_scenario(int(parts[1])) if parts[0] == "ring" else load("dense_random")
+    if parts[0] == "ring":
+        sc = ring_scenario(int(parts[1]))
+    elif parts[0] == "scn":
+        sc = load(parts[1], list(overrides))
+    else:
+        sc = load("dense_random", list(overrides))
     # a kind's label is the whole of its params: the scenario file's own are not inherited
     spec = dataclasses.replace(sc.resolver, kind=name, params=params, **knobs)
     return dataclasses.replace(sc, resolver=spec), seeds_of(parts[-1])
@@ -42,7 +47,17 @@ def scenario(case, kind, policy=()):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("cases", nargs="+", help="ring:N:SEEDS or dense:SEEDS")
+    ap.add_argument(
+        "cases", nargs="+", help="ring:N:SEEDS, dense:SEEDS or scn:SCENARIO:SEEDS (a file)"
+    )
+    ap.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="scenario override for scn: and dense: cases (as airspace-sim run --set)",
+    )
     ap.add_argument("--kinds", nargs="+", default=["bands", "bands-reciprocal"])
     ap.add_argument(
         "--policy",
@@ -64,7 +79,7 @@ def main(argv=None):
     )
     for case in args.cases:
         for kind in args.kinds:
-            sc, seeds = scenario(case, kind, args.policy)
+            sc, seeds = scenario(case, kind, args.policy, args.overrides)
             for seed in seeds:
                 t0 = time.perf_counter()
                 m = World(sc, seed=seed).run()
