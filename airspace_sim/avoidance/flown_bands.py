@@ -273,7 +273,7 @@ class FlownBandsResolver(BandsResolver):
             ge=0.0,
         )
         boxed_horizon_guard: float = param(
-            0.1,
+            0.3,
             doc="with boxed_horizon_s: rank over the short horizon only the candidates whose "
             "look-ahead ratio is at most this below the committed side's best",
             ge=0.0,
