@@ -50,15 +50,18 @@ Traced on ``fresh:ao`` (``results/loss_trace_switch_s21.txt``), every remaining 
 had one aircraft boxed on both sides for 5 s or more. With ``boxed_margin`` (≥ 0) the best of
 both sides is taken only when its as-flown ratio beats the committed side's best by more
 than the margin (a stateless hysteresis: on the symmetric ring the boxed sides' bests differ
-little and the plain rule flips sides from step to step). With ``boxed_horizon_s`` (H > 0)
-the boxed ownship ranks candidates first by their as-flown ratio over H (capped at 1), then
-over the look-ahead: traced on the dense losses of that rule (``docs/resolvers.md``, seventh
-part), the pair held ψ ≈ 0 at a ratio ≈ 0.9 because a third aircraft capped the left turn
-that cleared the imminent intruder, and the full look-ahead ratio cannot tell a conflict 15 s
-away from one 90 s away. Only candidates whose full ratio is within ``boxed_horizon_guard`` of
-the committed side's best take part: unguarded, on a tight ring everyone boxed flew on ahead
-(clear for H, then at a ratio near 0). Detection is ``"bands"``' straight CPA test at the current heading
-(the world's prefilter holds). Distances m, velocities m/s, times s, angles rad CCW positive.
+little and the plain rule flips sides from step to step).
+
+With ``boxed_horizon_s`` (H > 0) the boxed ownship ranks candidates first by their as-flown
+ratio over H (capped at 1), then over the look-ahead, so the imminent intruder is cleared
+first: the look-ahead ratio cannot tell a conflict 15 s away from one 90 s away, and the
+traced dense losses of the plain rule were pairs holding ψ ≈ 0 because a third, later aircraft
+capped the turn that cleared the imminent one. Only candidates whose look-ahead ratio is
+within ``boxed_horizon_guard`` of the committed side's best are ranked so: clear for H seconds
+and then at a ratio near 0 is no escape (``docs/resolvers.md``, seventh and ninth parts).
+
+Detection is ``"bands"``' straight CPA test at the current heading (the world's prefilter
+holds). Distances m, velocities m/s, times s, angles rad CCW positive.
 """
 
 from __future__ import annotations
