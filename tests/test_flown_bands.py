@@ -397,10 +397,10 @@ def test_boxed_horizon_ranks_by_the_short_horizon_first(seed):
     """boxed_horizon_s = H: a committed ownship boxed on both sides flies the candidate of
     largest full as-flown ratio among those of largest as-flown ratio over H (capped at 1,
     from an independent cpa_min_ratio_turning call over every row), counting only
-    candidates whose full ratio is within the guard of the committed side's best, when it
+    candidates whose full ratio is at least (1 - guard) times the committed side's best, when it
     beats the committed side's best over H, or ties over H and beats over the look-ahead,
     by more than the margin; every other row is boxed_best_both's."""
-    H, margin, guard, tol = 20.0, 0.05, 0.15, 1e-9
+    H, margin, guard, tol = 20.0, 0.05, 0.2, 1e-9
     vo, r, v, valid, mx = _random_scene(seed, n=400, k=8)
     n = vo.shape[0]
     rate, kept = np.full(n, RATE), _committed_sides(n)
@@ -430,7 +430,7 @@ def test_boxed_horizon_ranks_by_the_short_horizon_first(seed):
     for i in np.flatnonzero(boxed):
         own = own_best[i, 0 if kept[i] < 0 else 1]
         assert own >= 0
-        eligible = full[i] >= full[i, own] - guard
+        eligible = full[i] >= (1.0 - guard) * full[i, own]
         key = np.where(eligible, short[i], -np.inf)
         near = key >= key.max() - tol
         top = int(np.argmax(np.where(near, full[i], -np.inf)))
@@ -442,6 +442,9 @@ def test_boxed_horizon_ranks_by_the_short_horizon_first(seed):
     changed = out.heading_change != plain.heading_change
     assert changed.sum() >= 3
     assert boxed[changed].all()
+    # the guard leaves candidates out: without it some row flies another heading
+    unguarded = run(boxed_horizon_s=H, boxed_horizon_guard=1.0)
+    assert (unguarded.heading_change != out.heading_change).any()
 
 
 def test_boxed_horizon_clears_the_imminent_intruder_first():

@@ -56,8 +56,8 @@ With ``boxed_horizon_s`` (H > 0) the boxed ownship ranks candidates first by the
 ratio over H (capped at 1), then over the look-ahead, so the imminent intruder is cleared
 first: the look-ahead ratio cannot tell a conflict 15 s away from one 90 s away, and the
 traced dense losses of the plain rule were pairs holding ψ ≈ 0 because a third, later aircraft
-capped the turn that cleared the imminent one. Only candidates whose look-ahead ratio is
-within ``boxed_horizon_guard`` of the committed side's best are ranked so: clear for H seconds
+capped the turn that cleared the imminent one. Only candidates whose look-ahead ratio is at
+least ``1 − boxed_horizon_guard`` times the committed side's best are ranked so: clear for H seconds
 and then at a ratio near 0 is no escape (``docs/resolvers.md``, seventh and ninth parts).
 
 Detection is ``"bands"``' straight CPA test at the current heading (the world's prefilter
@@ -196,8 +196,8 @@ def best_of_both_when_boxed(
 
     With ``imminent`` (N, C) (the as-flown ratio over a short horizon) candidates are ranked
     first by ``min(imminent, 1)``, then by ``ratio``, among those whose ``ratio`` is at least
-    the committed side's best's minus ``guard`` (≥ 0; clear for the short horizon and then far
-    worse is no escape): the top one is the candidate of largest ``ratio`` among those within
+    ``1 − guard`` times the committed side's best's (``guard`` in [0, 1]; clear for the short
+    horizon and then far worse is no escape): the top one is the candidate of largest ``ratio`` among those within
     ``CLEAR_TOLERANCE`` of the largest ``min(imminent, 1)``, and it replaces the committed
     side's best when its ``min(imminent, 1)`` beats that one's by more than ``margin``, or ties
     it and its ``ratio`` beats by more than ``margin``. Where no candidate is short of 1 over
@@ -217,10 +217,10 @@ def best_of_both_when_boxed(
         at = np.maximum(b, 0)
         own_first = np.where(b >= 0, first_key[rows, at], -np.inf)
         own = np.where(b >= 0, score[rows, at], -np.inf)
+        finite = np.isfinite(own)
+        floor = np.where(finite, (1.0 - guard) * np.where(finite, own, 0.0), -np.inf)
         key = (
-            first_key
-            if imminent is None
-            else np.where(score >= own[:, None] - guard, first_key, -np.inf)
+            first_key if imminent is None else np.where(score >= floor[:, None], first_key, -np.inf)
         )
         near = key >= key.max(axis=1, keepdims=True) - CLEAR_TOLERANCE
         top = np.argmax(np.where(near, score, -np.inf), axis=1)
@@ -276,10 +276,11 @@ class FlownBandsResolver(BandsResolver):
             ge=0.0,
         )
         boxed_horizon_guard: float = param(
-            0.3,
+            0.7,
             doc="with boxed_horizon_s: rank over the short horizon only the candidates whose "
-            "look-ahead ratio is at most this below the committed side's best",
+            "look-ahead ratio is at least (1 - this) times the committed side's best",
             ge=0.0,
+            le=1.0,
         )
 
     def resolve(
