@@ -233,6 +233,43 @@ def best_of_both_when_boxed(
     return best
 
 
+def as_flown_on_rows(
+    base,
+    rows,
+    own_velocity,
+    rel_position,
+    rel_velocity,
+    valid,
+    safe,
+    usable,
+    radius,
+    lookahead_s,
+    turn_rate,
+):
+    """``base`` (N, C) with the ``rows`` (N,) bool replaced by the as-flown minimum CPA ratio
+    over ``lookahead_s`` of the candidates ``safe`` (N, C) rad (−inf where not ``usable``
+    (N, C)); a new array. Arrays as in :func:`cpa_min_ratio_turning`; ``turn_rate`` rad/s,
+    scalar or (N,), None: :data:`DEFAULT_TURN_RATE`."""
+    out = np.array(base, dtype=float, copy=True)
+    idx = np.flatnonzero(rows)
+    if idx.size and rel_position.shape[1] > 0:
+        n = own_velocity.shape[0]
+        rate = DEFAULT_TURN_RATE if turn_rate is None else turn_rate
+        rate_rows = np.broadcast_to(np.asarray(rate, dtype=float), (n,))[idx]
+        ratio = cpa_min_ratio_turning(
+            own_velocity[idx],
+            rel_position[idx],
+            rel_velocity[idx],
+            valid[idx],
+            safe[idx],
+            radius,
+            lookahead_s,
+            rate_rows,
+        )
+        out[idx] = np.where(usable[idx], ratio, -np.inf)
+    return out
+
+
 @registry.register("resolver", "bands-flown")
 class FlownBandsResolver(BandsResolver):
     """``"bands"``' open sides, the heading on a side judged as flown (module docstring)."""
@@ -305,25 +342,9 @@ class FlownBandsResolver(BandsResolver):
         clear = usable & (ratio >= 1.0 - CLEAR_TOLERANCE)
         # as flown only where the choice matters (a clear ownship keeps ψ = 0): the at-once
         # ratio elsewhere
-        flown = ratio.copy()
-        rows = np.flatnonzero(conflict)
-        if rows.size and r.shape[1] > 0:
-            rate = DEFAULT_TURN_RATE if turn_rate is None else turn_rate
-            rate_rows = np.broadcast_to(np.asarray(rate, dtype=float), (n,))[rows]
-            flown[rows] = np.where(
-                usable[rows],
-                cpa_min_ratio_turning(
-                    vo[rows],
-                    r[rows],
-                    v[rows],
-                    valid[rows],
-                    safe[rows],
-                    radius,
-                    p.lookahead_s,
-                    rate_rows,
-                ),
-                -np.inf,
-            )
+        flown = as_flown_on_rows(
+            ratio, conflict, vo, r, v, valid, safe, usable, radius, p.lookahead_s, turn_rate
+        )
         wanted = wanted_sides(committed_side, n)
         if self.params.fresh_sides_only:
             first, best = fresh_flown_sides(cand, clear, flown, wanted, committed_side)
@@ -335,7 +356,10 @@ class FlownBandsResolver(BandsResolver):
         if p.boxed_best_both and committed_side is not None:
             imminent = None
             if p.boxed_horizon_s > 0.0:
-                imminent = self._imminent(
+                # +inf off the boxed rows: nothing is short there, so the plain rule holds
+                imminent = as_flown_on_rows(
+                    np.full(cand.shape, np.inf),
+                    boxed_rows(first, usable, committed_side),
                     vo,
                     r,
                     v,
@@ -343,8 +367,8 @@ class FlownBandsResolver(BandsResolver):
                     safe,
                     usable,
                     radius,
+                    p.boxed_horizon_s,
                     turn_rate,
-                    boxed_rows(first, usable, committed_side),
                 )
             best = best_of_both_when_boxed(
                 first,
@@ -369,25 +393,3 @@ class FlownBandsResolver(BandsResolver):
             first_clear=first,
             best_blocked=best,
         )
-
-    def _imminent(self, vo, r, v, valid, safe, usable, radius, turn_rate, boxed):
-        """(N, C) as-flown minimum CPA ratio over ``boxed_horizon_s`` on the ``boxed`` (N,)
-        rows (+inf elsewhere: no candidate is short there, so the rule is the plain one;
-        −inf where unused)."""
-        n = vo.shape[0]
-        out = np.full(safe.shape, np.inf)
-        rows = np.flatnonzero(boxed)
-        if rows.size and r.shape[1] > 0:
-            rate = DEFAULT_TURN_RATE if turn_rate is None else turn_rate
-            rate_rows = np.broadcast_to(np.asarray(rate, dtype=float), (n,))[rows]
-            out[rows] = cpa_min_ratio_turning(
-                vo[rows],
-                r[rows],
-                v[rows],
-                valid[rows],
-                safe[rows],
-                radius,
-                self.params.boxed_horizon_s,
-                rate_rows,
-            )
-        return np.where(usable, out, -np.inf)
