@@ -280,6 +280,10 @@ class Resolver(ABC):
     #: :meth:`resolve` takes ``committed_side`` (N,) (−1 right, +1 left, 0 none), the side
     #: the CDA policy keeps, and may then search only that side (with ``reports_band``)
     uses_committed_side: ClassVar[bool] = False
+    #: with ``uses_committed_side``, :meth:`resolve` also takes ``held_heading_change`` (N,)
+    #: rad: the heading the CDA policy advised at the ownship's last detection in conflict
+    #: (an absolute heading) minus its current heading, wrapped to [−π, π); NaN: none
+    uses_held_heading: ClassVar[bool] = False
 
     params: object
 

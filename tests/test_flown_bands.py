@@ -519,3 +519,122 @@ def test_boxed_horizon_keeps_a_tight_ring_clear(seed):
     )
     m = World(sc, seed=seed).run()
     assert m["los_pairs"] == 0 and m["nmac_pairs"] == 0, m
+
+
+def test_held_candidate_is_the_nearest_usable_candidate_within_tolerance():
+    from airspace_sim.avoidance.flown_bands import held_candidate
+
+    cand = np.array([[0.0, -0.1, 0.1, -0.2, np.nan], [0.0, -0.1, 0.1, np.nan, np.nan]] * 2)
+    usable = ~np.isnan(cand)
+    held = np.array([0.09, -0.25, np.nan, 0.3])
+    # rows 1 and 3 have no -0.2: their nearest (-0.1, 0.1) are 0.15 and 0.2 away
+    np.testing.assert_array_equal(held_candidate(cand, usable, held, 0.06), [2, -1, -1, -1])
+    np.testing.assert_array_equal(held_candidate(cand, usable, held, 0.25), [2, 1, -1, 2])
+
+
+@pytest.mark.parametrize("seed, hold_margin", [(3, 0.2), (4, 0.05)])
+def test_boxed_hold_heading_measures_gains_against_the_held_heading(seed, hold_margin):
+    """boxed_hold_heading: a committed ownship boxed on both sides keeps the candidate it was
+    advised (``held_heading_change``) unless the top-ranked candidate (over 20 s first, then
+    over the look-ahead, from an independent cpa_min_ratio_turning call) beats it by more
+    than boxed_hold_margin; rows without a held heading, and rows not boxed, are the rule
+    without it."""
+    H, margin, guard, tol = 20.0, 0.1, 0.7, 1e-9
+    vo, r, v, valid, mx = _random_scene(seed, n=400, k=8)
+    n = vo.shape[0]
+    rate, kept = np.full(n, RATE), _committed_sides(n)
+    base = dict(boxed_best_both=True, boxed_margin=margin, boxed_horizon_s=H, **AO)
+    base["boxed_horizon_guard"] = guard
+    plain = FlownBandsResolver(FlownBandsResolver.Params(**base)).resolve(
+        vo, r, v, valid, mx, turn_rate=rate, committed_side=kept
+    )
+    usable = ~np.isnan(plain.candidates)
+    rng = np.random.default_rng(seed)
+    held_idx = np.array([rng.choice(np.flatnonzero(u)) for u in usable])
+    held_idx[np.arange(n) % 4 == 0] = -1
+    held = np.where(held_idx >= 0, plain.candidates[np.arange(n), np.maximum(held_idx, 0)], np.nan)
+    params = FlownBandsResolver.Params(
+        boxed_hold_heading=True, boxed_hold_margin=hold_margin, **base
+    )
+    out = FlownBandsResolver(params).resolve(
+        vo, r, v, valid, mx, turn_rate=rate, committed_side=kept, held_heading_change=held
+    )
+    np.testing.assert_array_equal(out.first_clear, plain.first_clear)
+    safe = np.where(usable, plain.candidates, 0.0)
+    short = np.minimum(cpa_min_ratio_turning(vo, r, v, valid, safe, 3300.0, H, rate), 1.0)
+    short = np.where(usable, short, -np.inf)
+    full = np.where(usable, plain.min_ratio, -np.inf)
+    boxed = (plain.first_clear[:, 0] < 0) & (plain.first_clear[:, 1] < 0) & (kept != 0)
+    expected = plain.heading_change.copy()
+    for i in np.flatnonzero(boxed & (held_idx >= 0)):
+        own = held_idx[i]
+        key = np.where(full[i] >= (1.0 - guard) * full[i, own], short[i], -np.inf)
+        top = int(np.argmax(np.where(key >= key.max() - tol, full[i], -np.inf)))
+        beats = short[i, top] > short[i, own] + hold_margin or (
+            short[i, top] >= short[i, own] - tol and full[i, top] > full[i, own] + hold_margin
+        )
+        expected[i] = plain.candidates[i, top if beats else own]
+    np.testing.assert_array_equal(out.heading_change, expected)
+    changed = out.heading_change != plain.heading_change
+    assert changed.sum() >= 3
+    assert (boxed & (held_idx >= 0))[changed].all()
+
+
+def test_policy_holds_the_advised_heading_and_hands_it_back():
+    """The CDA policy owns the held heading: after each detection it is the heading the
+    ownship in conflict was advised to reach (its advice is that minus the current heading,
+    clipped to the turn limit), NaN elsewhere; at the next detection the resolver receives it
+    minus the new heading, wrapped."""
+    from airspace_sim.geometry import wrap_angle
+    from airspace_sim.scenarios import load
+    from airspace_sim.world import World
+
+    sc = load(
+        "ring",
+        ["traffic.count=8", "traffic.radius=9000.0", "resolver.params.boxed_hold_heading=true"],
+    )
+    world = World(sc, seed=0)
+    policy, given = world.policy, []
+    resolve = policy.resolver.resolve
+    # every gathered ownship reaches the resolver (the prefilter only saves work)
+    policy.resolver.prefilter = False
+
+    def spy(*args, **kw):
+        given.append(kw["held_heading_change"].copy())
+        return resolve(*args, **kw)
+
+    policy.resolver.resolve = spy
+    handed_back = 0
+    for _ in range(40):
+        before = policy.held_heading.copy()
+        given.clear()
+        world.step()
+        held, conflict = policy.held_heading, policy.conflict
+        assert np.isnan(held[~conflict]).all() and np.isfinite(held[conflict]).all()
+        heading = np.arctan2(world.velocities[:, 1], world.velocities[:, 0])
+        mx = world.max_turn_rate * world.dt
+        np.testing.assert_allclose(
+            np.clip(wrap_angle(held - heading), -mx, mx)[conflict],
+            policy.advice[conflict],
+            atol=1e-12,
+        )
+        if given:
+            owners = policy._encounters.owners
+            np.testing.assert_allclose(
+                given[0], wrap_angle(before[owners] - heading[owners]), atol=1e-12
+            )
+            handed_back += int(np.isfinite(given[0]).sum())
+    assert handed_back > 20
+
+
+def test_policy_unpickles_a_checkpoint_from_before_the_held_heading():
+    from airspace_sim.scenarios import load
+    from airspace_sim.world import World
+    from airspace_sim.world.policy import AvoidancePolicy
+
+    world = World(load("ring"), seed=0)
+    state = dict(world.policy.__dict__)
+    del state["held_heading"]
+    policy = AvoidancePolicy.__new__(AvoidancePolicy)
+    policy.__setstate__(state)
+    assert policy.held_heading.shape == (world.n,) and np.isnan(policy.held_heading).all()

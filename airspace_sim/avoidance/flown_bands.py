@@ -60,6 +60,12 @@ capped the turn that cleared the imminent one. Only candidates whose look-ahead 
 least ``1 − boxed_horizon_guard`` times the committed side's best are ranked so: clear for H seconds
 and then at a ratio near 0 is no escape (``docs/resolvers.md``, seventh and ninth parts).
 
+With ``boxed_hold_heading`` the boxed ownship measures those gains against the heading it was
+advised at the last detection (``held_heading_change``, which the CDA policy keeps), not its
+committed side's best: a heading hysteresis. Traced on the 300-ring under a decaying resume
+clearance, a knot of boxed aircraft changed advice every few steps (ψ ≈ 0, +43°, 0, +37°, …)
+and lost 14 pairs (``docs/resolvers.md``, ninth part).
+
 Detection is ``"bands"``' straight CPA test at the current heading (the world's prefilter
 holds). Distances m, velocities m/s, times s, angles rad CCW positive.
 """
@@ -184,8 +190,28 @@ def boxed_rows(first_clear, usable, committed_side):
     return boxed & (side != 0)
 
 
+def held_candidate(candidates, usable, held_heading_change, tolerance):
+    """(N,) index of the usable candidate nearest ``held_heading_change`` (N,) rad, −1 where
+    that is NaN or no usable candidate of ``candidates`` (N, C) rad (``usable`` (N, C)) is
+    within ``tolerance`` rad of it."""
+    held = np.asarray(held_heading_change, dtype=float)[:, None]
+    gap = np.where(usable & np.isfinite(held), np.abs(candidates - held), np.inf)
+    at = np.argmin(gap, axis=1)
+    near = gap[np.arange(gap.shape[0]), at] <= tolerance
+    return np.where(near, at, -1)
+
+
 def best_of_both_when_boxed(
-    first_clear, best_blocked, ratio, usable, committed_side, margin=0.0, imminent=None, guard=0.0
+    first_clear,
+    best_blocked,
+    ratio,
+    usable,
+    committed_side,
+    margin=0.0,
+    imminent=None,
+    guard=0.0,
+    incumbent=None,
+    hold_margin=None,
 ):
     """``best_blocked`` (N, 2) with the committed side's entry (``committed_side`` (N,) −1
     right, +1 left, 0 none) replaced by the candidate of largest ``ratio`` (N, C) over both
@@ -201,7 +227,12 @@ def best_of_both_when_boxed(
     ``CLEAR_TOLERANCE`` of the largest ``min(imminent, 1)``, and it replaces the committed
     side's best when its ``min(imminent, 1)`` beats that one's by more than ``margin``, or ties
     it and its ``ratio`` beats by more than ``margin``. Where no candidate is short of 1 over
-    the short horizon this is the rule without ``imminent``."""
+    the short horizon this is the rule without ``imminent``.
+
+    With ``incumbent`` (N,) (candidate indices, −1: none) the incumbent a boxed row keeps
+    unless beaten is that candidate where given, not the committed side's best (a heading
+    hysteresis: the ownship holds the heading it was advised until a candidate gains by
+    more than ``hold_margin``, None: ``margin``)."""
     best = best_blocked.copy()
     n = best.shape[0]
     side = np.broadcast_to(np.asarray(committed_side, dtype=float), (n,))
@@ -214,6 +245,11 @@ def best_of_both_when_boxed(
     boxed = boxed_rows(first_clear, usable, committed_side)
     for value, col in ((-1.0, 0), (1.0, 1)):
         b = best[:, col]
+        gain = margin
+        if incumbent is not None:
+            held = boxed & (side == value) & (incumbent >= 0)
+            b = np.where(held, incumbent, b)
+            gain = np.where(held, margin if hold_margin is None else hold_margin, margin)
         at = np.maximum(b, 0)
         own_first = np.where(b >= 0, first_key[rows, at], -np.inf)
         own = np.where(b >= 0, score[rows, at], -np.inf)
@@ -225,11 +261,11 @@ def best_of_both_when_boxed(
         near = key >= key.max(axis=1, keepdims=True) - CLEAR_TOLERANCE
         top = np.argmax(np.where(near, score, -np.inf), axis=1)
         top_first, top_score = first_key[rows, top], score[rows, top]
-        beats = (top_first > own_first + margin) | (
-            (top_first >= own_first - CLEAR_TOLERANCE) & (top_score > own + margin)
+        beats = (top_first > own_first + gain) | (
+            (top_first >= own_first - CLEAR_TOLERANCE) & (top_score > own + gain)
         )
-        swap = boxed & (side == value) & beats
-        best[:, col] = np.where(swap, top, b)
+        mine = boxed & (side == value)
+        best[:, col] = np.where(mine & beats, top, np.where(mine, b, best[:, col]))
     return best
 
 
@@ -319,6 +355,21 @@ class FlownBandsResolver(BandsResolver):
             ge=0.0,
             le=1.0,
         )
+        boxed_hold_heading: bool = param(
+            False,
+            doc="with boxed_best_both: a boxed ownship keeps the candidate nearest the heading "
+            "it was advised at the last detection unless another beats it by more than "
+            "boxed_hold_margin (instead of measuring the gain against its committed side's "
+            "best)",
+        )
+        boxed_hold_margin: float = param(
+            0.1,
+            doc="with boxed_hold_heading: the gain (as-flown ratio) a candidate needs over "
+            "the held heading to replace it",
+            ge=0.0,
+        )
+
+    uses_held_heading = True
 
     def resolve(
         self,
@@ -331,6 +382,7 @@ class FlownBandsResolver(BandsResolver):
         mode_predictions=None,
         turn_rate=None,
         committed_side=None,
+        held_heading_change=None,
     ):
         p = self.params
         vo, r, v, valid, mx = _arrays(
@@ -370,6 +422,10 @@ class FlownBandsResolver(BandsResolver):
                     p.boxed_horizon_s,
                     turn_rate,
                 )
+            incumbent = None
+            if p.boxed_hold_heading and held_heading_change is not None:
+                held = np.broadcast_to(np.asarray(held_heading_change, dtype=float), (n,))
+                incumbent = held_candidate(cand, usable, held, p.resolution)
             best = best_of_both_when_boxed(
                 first,
                 best,
@@ -379,6 +435,8 @@ class FlownBandsResolver(BandsResolver):
                 p.boxed_margin,
                 imminent,
                 p.boxed_horizon_guard,
+                incumbent,
+                p.boxed_hold_margin,
             )
         idx = np.arange(n)
         choice = band_choice(

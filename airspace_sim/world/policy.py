@@ -33,6 +33,7 @@ from airspace_sim.avoidance.bands import CLEAR_TOLERANCE
 from airspace_sim.avoidance.cpa import cpa_min_ratio, cpa_pair_ratios
 from airspace_sim.avoidance.resolvers import build_resolver
 from airspace_sim.avoidance.turn_paths import turned_path_min_ratio
+from airspace_sim.geometry import wrap_angle
 from airspace_sim.tracking.prediction import relative_positions
 from airspace_sim.world.control import Encounters, gather, screen
 
@@ -67,6 +68,9 @@ class AvoidancePolicy:
     off_route_s : (N,) s since the aircraft last flew its autopilot without a pending turn
         back.
     following : (N,) bool, the aircraft flew the policy (advice or hold) in the last step.
+    held_heading : (N,) rad, the absolute heading advised at the last detection to an
+        ownship in conflict (current heading + its chosen heading change), NaN elsewhere;
+        given back to resolvers with ``uses_held_heading``.
     r_safe, lookahead_s, margin : the resolver's clear radius ``r_safe·(1 + margin)`` and
         look-ahead, m, s, -.
     """
@@ -108,8 +112,15 @@ class AvoidancePolicy:
         self.side = np.zeros(n)
         self.off_route_s = np.zeros(n)
         self.following = np.zeros(n, dtype=bool)
+        self.held_heading = np.full(n, np.nan)
         self._clear_for = np.zeros(n, dtype=np.int64)
         self._encounters = Encounters.empty()
+
+    def __setstate__(self, state):
+        """Unpickle; a checkpoint from before ``held_heading`` holds none (NaN)."""
+        if "held_heading" not in state:
+            state["held_heading"] = np.full(np.asarray(state["advice"]).size, np.nan)
+        self.__dict__.update(state)
 
     # ------------------------------------------------------------- commands
     def override(self, rate, desired, active, velocities, max_heading_change, avoid=None):
@@ -271,6 +282,7 @@ class AvoidancePolicy:
         self._encounters = enc
         advice = np.zeros(n)
         conflict = np.zeros(n, dtype=bool)
+        held = np.full(n, np.nan)
         res = self.resolver
         if enc.owners.size and res.prefilter:
             enc = self._prefilter(enc, velocities)
@@ -284,6 +296,10 @@ class AvoidancePolicy:
             # a kept side needs only that side's best blocked candidate (see _commit)
             commits = res.uses_committed_side and res.reports_band and self.preference != "none"
             side = {"committed_side": self.side[enc.owners]} if commits else {}
+            own_vo = velocities[enc.owners]
+            heading = np.arctan2(own_vo[:, 1], own_vo[:, 0])
+            if commits and res.uses_held_heading:
+                side["held_heading_change"] = wrap_angle(self.held_heading[enc.owners] - heading)
             out = res.resolve(
                 velocities[enc.owners],
                 enc.rel_position,
@@ -307,11 +323,13 @@ class AvoidancePolicy:
                 )
             advice[enc.owners] = np.clip(psi, -mx, mx)
             conflict[enc.owners] = c
+            held[enc.owners] = np.where(c, heading + psi, np.nan)
         conflict &= active
         # forget the committed side once clear for side_memory_s
         self._clear_for = np.where(conflict, 0, self._clear_for + 1)
         self.side[self._clear_for >= self.memory_steps] = 0.0
         self.advice, self.conflict = advice, conflict
+        self.held_heading = np.where(conflict, held, np.nan)
         return advice, conflict
 
     def _prefilter(self, enc: Encounters, velocities) -> Encounters:
