@@ -523,6 +523,12 @@ def _with(path: str, value):
         ("resolver.confirm_s", -1.0, "resolver.confirm_s: expected a non-negative number"),
         ("resolver.side_memory_s", -1.0, "resolver.side_memory_s: expected a non-negative"),
         ("resolver.resume_decay_s", 0.0, "resolver.resume_decay_s: expected a positive number"),
+        (
+            "resolver.resume_margin_floor",
+            2.0,
+            "resolver.resume_margin_floor: expected at most resolver.resume_margin (1.5), got 2",
+        ),
+        ("resolver.resume_margin_floor", -0.1, "resolver.resume_margin_floor: expected a"),
         ("resolver.probability_samples", 0, "probability_samples: expected a positive integer"),
         ("resolver.probability_samples", 2**63 - 1, "expected a positive integer up to 1000"),
         ("resolver.lookahead", 1e308, "resolver.lookahead: expected a positive number up to 3600"),

@@ -410,6 +410,42 @@ def test_resume_margin_shrinks_over_resume_decay_s(off_route_s, clear):
     assert got.tolist() == [clear]
 
 
+@pytest.mark.parametrize(
+    "off_route_s, clear", [(0.0, False), (15.0, False), (20.0, True), (300.0, True)]
+)
+def test_resume_margin_stops_at_resume_margin_floor(off_route_s, clear):
+    # As above with resume_margin_floor 0.5: extra = 0.5 + 1.0·(1 − off/30), a clear radius
+    # of 7800 m at 0 s, 6300 m at 15 s (blocked at 6000 m), 5800 m at 20 s (clear) and
+    # 4800 m from 30 s on; an intruder at 4500 m is blocked however long the decay.
+    from airspace_sim.scenarios import load
+    from airspace_sim.world.control import Encounters
+    from airspace_sim.world.policy import AvoidancePolicy
+
+    sc = load(
+        "dense_random",
+        [
+            "resolver.resume_decay_s=30.0",
+            "resolver.lookahead=120.0",
+            "resolver.resume_margin_floor=0.5",
+        ],
+    )
+    avoid = AvoidancePolicy(sc, 1.0, np.ones(2, bool), np.ones(2, bool))
+    avoid.off_route_s = np.array([off_route_s, 0.0])
+    velocities = np.array([[200.0, 0.0], [200.0, 0.0]])
+    got = []
+    for distance in (6000.0, 4500.0):
+        enc = Encounters(
+            np.array([0]),
+            np.array([[0]]),
+            np.array([[[0.0, distance]]]),
+            np.zeros((1, 1, 2)),
+            np.array([[True]]),
+        )
+        ok = avoid._resume_clear(enc, velocities, np.zeros(1), np.full(2, np.radians(3.0)))
+        got.append(bool(ok[0]))
+    assert got == [clear, False]
+
+
 def test_dense_random_traffic_reaches_its_routes():
     # Before resume_decay_s and the shorter look-ahead, 40 of 60 aircraft were still flying
     # after 600 s, many 100 km past the sector edge (extra path ~600%, seed 0).

@@ -221,6 +221,7 @@ RANGES: dict[str, Callable[[Any], str | None]] = {
     "ResolverSpec.confirm_s": _range(0, MAX_LOOKAHEAD_S, unit="s"),
     "ResolverSpec.resume_margin": _range(0, 100.0),
     "ResolverSpec.resume_decay_s": _range(0, MAX_TIME_S, lo_open=True, unit="s"),
+    "ResolverSpec.resume_margin_floor": _range(0, 100.0),
     "ResolverSpec.resume_rule": _one_of(RESUME_RULES),
     "ResolverSpec.resume_turn_s": _range(0, MAX_LOOKAHEAD_S, unit="s"),
     "ResolverSpec.probability_horizon_s": _range(0, MAX_LOOKAHEAD_S, lo_open=True, unit="s"),
@@ -360,6 +361,12 @@ def check_scenario(sc: Scenario) -> None:
             "separation.nmac",
             f"expected less than separation.r_safe ({sc.separation.r_safe:g} m), "
             f"got {sc.separation.nmac:g}",
+        )
+    if sc.resolver.resume_margin_floor > sc.resolver.resume_margin:
+        raise Invalid(
+            "resolver.resume_margin_floor",
+            f"expected at most resolver.resume_margin ({sc.resolver.resume_margin:g}), "
+            f"got {sc.resolver.resume_margin_floor:g}",
         )
     t = sc.traffic
     if t.controlled > t.count:

@@ -80,6 +80,9 @@ class ResolverSpec:
     #: never); random traffic needs it, or aircraft wait for a clearance that never opens
     #: (docs/tuning.md)
     resume_decay_s: float | None = None
+    #: with resume_decay_s: the extra fraction the decay stops at (0 ≤ floor ≤ resume_margin;
+    #: 0: it shrinks to r_safe·(1 + margin))
+    resume_margin_floor: float = 0.0
     #: how a clear ownship's turn back is judged against r_safe·(1 + margin + resume_margin)
     #: (world CDA policy, docs/resolvers.md "Resume rules"): "hold" (the turn clears that
     #: radius, else the heading is held), "partial" (the largest of 1, 1/2, 1/4 of the turn

@@ -15,7 +15,8 @@ reaches into it:
   the turn side is committed.
 
 Policy knobs live in ``scenario.resolver`` (``search_deg``, ``turn_preference``,
-``confirm_s``, ``resume_margin``, ``resume_decay_s``, ``resume_rule``, ``resume_turn_s``,
+``confirm_s``, ``resume_margin``, ``resume_decay_s``, ``resume_margin_floor``,
+``resume_rule``, ``resume_turn_s``,
 ``resume_turn_clear``, ``side_memory_s``,
 ``probability_horizon_s``, ``probability_samples``); why they have the values they have is
 in ``docs/tuning.md``.
@@ -89,6 +90,7 @@ class AvoidancePolicy:
         self.search_range = math.radians(float(spec.search_deg))
         self.resume_margin = float(spec.resume_margin)
         self.resume_decay_s = None if spec.resume_decay_s is None else float(spec.resume_decay_s)
+        self.resume_margin_floor = float(spec.resume_margin_floor)
         self.resume_rule = spec.resume_rule
         self.resume_turn_s = float(spec.resume_turn_s)
         self.resume_turn_clear = bool(spec.resume_turn_clear)
@@ -117,9 +119,10 @@ class AvoidancePolicy:
         self._encounters = Encounters.empty()
 
     def __setstate__(self, state):
-        """Unpickle; a checkpoint from before ``held_heading`` holds none (NaN)."""
+        """Unpickle; a checkpoint from before ``held_heading`` holds none (NaN) and no decay floor."""
         if "held_heading" not in state:
             state["held_heading"] = np.full(np.asarray(state["advice"]).size, np.nan)
+        state.setdefault("resume_margin_floor", 0.0)
         self.__dict__.update(state)
 
     # ------------------------------------------------------------- commands
@@ -172,15 +175,23 @@ class AvoidancePolicy:
             self.off_route_s = np.zeros(n)
         return out
 
+    def _resume_extra(self, owners):
+        """(n_own,) the resume clearance's extra fraction of r_safe for ``owners`` (n_own,)
+        int: ``resume_margin``, shrinking linearly over ``resume_decay_s`` off the route to
+        ``resume_margin_floor``."""
+        extra = np.full(owners.size, self.resume_margin)
+        if self.resume_decay_s is not None:
+            left = np.clip(1.0 - self.off_route_s[owners] / self.resume_decay_s, 0.0, 1.0)
+            floor = self.resume_margin_floor
+            extra = floor + (extra - floor) * left
+        return extra
+
     def _resume_clear(self, enc: Encounters, velocities, turn, max_heading_change):
         """(n_own,) bool: is the heading change ``turn`` (n_own,) rad clear for enc's
-        ownships, by ``r_safe·(1 + margin + extra)``, ``extra = resume_margin`` shrinking
-        linearly to 0 over ``resume_decay_s`` off the route."""
+        ownships, by ``r_safe·(1 + margin + extra)`` (:meth:`_resume_extra`)."""
         vo = velocities[enc.owners]
         desired = np.arctan2(vo[:, 1], vo[:, 0]) + turn
-        extra = np.full(enc.owners.size, self.resume_margin)
-        if self.resume_decay_s is not None:
-            extra *= np.clip(1.0 - self.off_route_s[enc.owners] / self.resume_decay_s, 0.0, 1.0)
+        extra = self._resume_extra(enc.owners)
         _, clear = resume_heading_change(
             vo,
             desired,
@@ -221,9 +232,7 @@ class AvoidancePolicy:
         vo = velocities[enc.owners]
         mx = max_heading_change[enc.owners]
         psi = np.clip(turn, -mx, mx)[:, None] * RESUME_FRACTIONS[None, :]
-        extra = np.full(enc.owners.size, self.resume_margin)
-        if self.resume_decay_s is not None:
-            extra *= np.clip(1.0 - self.off_route_s[enc.owners] / self.resume_decay_s, 0.0, 1.0)
+        extra = self._resume_extra(enc.owners)
         base = 1.0 + self.margin
         wide = base + extra
         radius = (self.r_safe * wide)[:, None]
