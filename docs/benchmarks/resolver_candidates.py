@@ -84,6 +84,8 @@ def main(argv=None):
                 t0 = time.perf_counter()
                 m = World(sc, seed=seed).run()
                 row = {"case": case, "kind": kind, "policy": " ".join(args.policy), "seed": seed}
+                if args.overrides and not case.startswith("ring:"):
+                    row["set"] = " ".join(args.overrides)  # what --set changed in the file
                 row.update({k: m[k] for k in keys})
                 row["wall_s"] = round(time.perf_counter() - t0, 1)
                 print(json.dumps(row), flush=True)
