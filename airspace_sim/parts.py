@@ -284,6 +284,9 @@ class Resolver(ABC):
     #: rad: the heading the CDA policy advised at the ownship's last detection in conflict
     #: (an absolute heading) minus its current heading, wrapped to [−π, π); NaN: none
     uses_held_heading: ClassVar[bool] = False
+    #: :meth:`resolve` takes ``intruder_turn_rate`` (N, K) rad/s: each intruder track's
+    #: estimated turn rate (the track state's Ω, CCW positive; 0 where the tracker has none)
+    uses_intruder_turn_rate: ClassVar[bool] = False
 
     params: object
 

@@ -304,11 +304,15 @@ class AvoidancePolicy:
                 )
             # a kept side needs only that side's best blocked candidate (see _commit)
             commits = res.uses_committed_side and res.reports_band and self.preference != "none"
-            side = {"committed_side": self.side[enc.owners]} if commits else {}
+            # the keyword arguments the resolver declares it takes (its capabilities)
+            given = {"committed_side": self.side[enc.owners]} if commits else {}
             own_vo = velocities[enc.owners]
             heading = np.arctan2(own_vo[:, 1], own_vo[:, 0])
             if commits and res.uses_held_heading:
-                side["held_heading_change"] = wrap_angle(self.held_heading[enc.owners] - heading)
+                given["held_heading_change"] = wrap_angle(self.held_heading[enc.owners] - heading)
+            if res.uses_intruder_turn_rate:
+                omega = view.x[np.maximum(enc.rows, 0), 4]
+                given["intruder_turn_rate"] = np.where(enc.rows >= 0, np.nan_to_num(omega), 0.0)
             out = res.resolve(
                 velocities[enc.owners],
                 enc.rel_position,
@@ -317,7 +321,7 @@ class AvoidancePolicy:
                 np.maximum(mx, self.search_range),
                 mode_predictions=pred,
                 turn_rate=mx / self.dt if res.uses_turn_rate else None,
-                **side,
+                **given,
             )
             psi = np.asarray(out.heading_change, dtype=float)
             c = np.asarray(out.conflict, dtype=bool)
