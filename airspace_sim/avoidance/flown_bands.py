@@ -68,11 +68,12 @@ and lost 14 pairs (``docs/resolvers.md``, ninth part).
 
 ``"bands-flown-turns"`` (:class:`TurnAwareFlownBandsResolver`) also predicts each intruder
 turning at its track's estimated rate for ``intruder_turn_s``; measured on ``dense_random`` it
-loses more pairs and flies longer detours than ``"bands-flown"`` (``docs/resolvers.md``, tenth
-part).
+flies longer detours than ``"bands-flown"`` and loses no fewer pairs (``docs/resolvers.md``,
+tenth part).
 
 Detection is ``"bands"``' straight CPA test at the current heading (the world's prefilter
-holds; not for ``"bands-flown-turns"``). Distances m, velocities m/s, times s, angles rad CCW positive.
+holds; not for ``"bands-flown-turns"``). Distances m, velocities m/s, times s, angles rad CCW
+positive.
 """
 
 from __future__ import annotations
@@ -495,8 +496,10 @@ class TurnAwareFlownBandsResolver(FlownBandsResolver):
     track's estimated turn rate (the state's Ω, clipped to the ownship's own turn limit) for
     ``intruder_turn_s``, then straight (the smaller ratio counts;
     :func:`~airspace_sim.avoidance.cpa_intruder_turning.cpa_min_ratio_intruder_turning`).
-    Traced on ``dense_random`` (``docs/resolvers.md``, tenth part), the losses left were pairs
-    whose straight miss closed while one aircraft turned for a third. The conflict is no
+    Traced on ``dense_random`` (``docs/resolvers.md``, ninth and tenth parts), some of the
+    losses left were pairs whose straight miss closed while one aircraft turned for a third;
+    measured there (tenth part), the turned prediction adds alerts for aircraft whose
+    avoidance turns end soon, and longer detours, with no fewer losses. The conflict is no
     longer the straight test alone, so the world's prefilter is off."""
 
     @dataclass(frozen=True)

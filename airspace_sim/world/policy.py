@@ -119,7 +119,8 @@ class AvoidancePolicy:
         self._encounters = Encounters.empty()
 
     def __setstate__(self, state):
-        """Unpickle; a checkpoint from before ``held_heading`` holds none (NaN) and no decay floor."""
+        """Unpickle; a checkpoint from before ``held_heading`` and ``resume_margin_floor``
+        holds no held heading (NaN) and a floor of 0."""
         if "held_heading" not in state:
             state["held_heading"] = np.full(np.asarray(state["advice"]).size, np.nan)
         state.setdefault("resume_margin_floor", 0.0)
