@@ -392,6 +392,20 @@ def test_boxed_horizon_at_the_lookahead_is_boxed_best_both():
         np.testing.assert_array_equal(getattr(same, name), getattr(plain, name))
 
 
+def _boxed_pick(short, full, own, guard, margin, tol=1e-9):
+    """The candidate a boxed row flies, one row at a time: among the candidates whose full
+    ratio ``full`` (C,) is at least (1 - guard) times the incumbent ``own``'s, the one of
+    largest full ratio among those of largest short-horizon ratio ``short`` (C,), if it beats
+    the incumbent by more than ``margin`` over the short horizon (or ties there and beats over
+    the look-ahead); else ``own``."""
+    key = np.where(full >= (1.0 - guard) * full[own], short, -np.inf)
+    top = int(np.argmax(np.where(key >= key.max() - tol, full, -np.inf)))
+    beats = short[top] > short[own] + margin or (
+        short[top] >= short[own] - tol and full[top] > full[own] + margin
+    )
+    return top if beats else own
+
+
 @pytest.mark.parametrize("seed", [7, 11])
 def test_boxed_horizon_ranks_by_the_short_horizon_first(seed):
     """boxed_horizon_s = H: a committed ownship boxed on both sides flies the candidate of
@@ -400,7 +414,7 @@ def test_boxed_horizon_ranks_by_the_short_horizon_first(seed):
     candidates whose full ratio is at least (1 - guard) times the committed side's best, when it
     beats the committed side's best over H, or ties over H and beats over the look-ahead,
     by more than the margin; every other row is boxed_best_both's."""
-    H, margin, guard, tol = 20.0, 0.05, 0.2, 1e-9
+    H, margin, guard = 20.0, 0.05, 0.2
     vo, r, v, valid, mx = _random_scene(seed, n=400, k=8)
     n = vo.shape[0]
     rate, kept = np.full(n, RATE), _committed_sides(n)
@@ -430,14 +444,7 @@ def test_boxed_horizon_ranks_by_the_short_horizon_first(seed):
     for i in np.flatnonzero(boxed):
         own = own_best[i, 0 if kept[i] < 0 else 1]
         assert own >= 0
-        eligible = full[i] >= (1.0 - guard) * full[i, own]
-        key = np.where(eligible, short[i], -np.inf)
-        near = key >= key.max() - tol
-        top = int(np.argmax(np.where(near, full[i], -np.inf)))
-        beats = short[i, top] > short[i, own] + margin or (
-            short[i, top] >= short[i, own] - tol and full[i, top] > full[i, own] + margin
-        )
-        expected[i] = plain.candidates[i, top if beats else own]
+        expected[i] = plain.candidates[i, _boxed_pick(short[i], full[i], own, guard, margin)]
     np.testing.assert_array_equal(out.heading_change, expected)
     changed = out.heading_change != plain.heading_change
     assert changed.sum() >= 3
@@ -539,7 +546,7 @@ def test_boxed_hold_heading_measures_gains_against_the_held_heading(seed, hold_m
     over the look-ahead, from an independent cpa_min_ratio_turning call) beats it by more
     than boxed_hold_margin; rows without a held heading, and rows not boxed, are the rule
     without it."""
-    H, margin, guard, tol = 20.0, 0.1, 0.7, 1e-9
+    H, margin, guard = 20.0, 0.1, 0.7
     vo, r, v, valid, mx = _random_scene(seed, n=400, k=8)
     n = vo.shape[0]
     rate, kept = np.full(n, RATE), _committed_sides(n)
@@ -567,13 +574,8 @@ def test_boxed_hold_heading_measures_gains_against_the_held_heading(seed, hold_m
     boxed = (plain.first_clear[:, 0] < 0) & (plain.first_clear[:, 1] < 0) & (kept != 0)
     expected = plain.heading_change.copy()
     for i in np.flatnonzero(boxed & (held_idx >= 0)):
-        own = held_idx[i]
-        key = np.where(full[i] >= (1.0 - guard) * full[i, own], short[i], -np.inf)
-        top = int(np.argmax(np.where(key >= key.max() - tol, full[i], -np.inf)))
-        beats = short[i, top] > short[i, own] + hold_margin or (
-            short[i, top] >= short[i, own] - tol and full[i, top] > full[i, own] + hold_margin
-        )
-        expected[i] = plain.candidates[i, top if beats else own]
+        pick = _boxed_pick(short[i], full[i], held_idx[i], guard, hold_margin)
+        expected[i] = plain.candidates[i, pick]
     np.testing.assert_array_equal(out.heading_change, expected)
     changed = out.heading_change != plain.heading_change
     assert changed.sum() >= 3
