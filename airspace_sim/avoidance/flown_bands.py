@@ -500,7 +500,8 @@ class TurnAwareFlownBandsResolver(FlownBandsResolver):
     losses left were pairs whose straight miss closed while one aircraft turned for a third;
     measured there (tenth part), the turned prediction adds alerts for aircraft whose
     avoidance turns end soon, and longer detours, with no fewer losses. The conflict is no
-    longer the straight test alone, so the world's prefilter is off."""
+    longer the straight test alone, so the world's prefilter is off; the boxed ownship's
+    short-horizon ranking (``boxed_horizon_s``) still predicts intruders straight."""
 
     @dataclass(frozen=True)
     class Params(FlownBandsResolver.Params):
