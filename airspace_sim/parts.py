@@ -287,6 +287,11 @@ class Resolver(ABC):
     #: :meth:`resolve` takes ``intruder_turn_rate`` (N, K) rad/s: each intruder track's
     #: estimated turn rate (the track state's Ω, CCW positive; 0 where the tracker has none)
     uses_intruder_turn_rate: ClassVar[bool] = False
+    #: speed as a second control: :meth:`resolve` takes ``speed_limits`` (N, 2) m/s, the
+    #: lowest and highest ground speed each ownship may fly (equal: heading only), and
+    #: ``max_acceleration`` (N,) m/s², its along-track limit; the output carries
+    #: ``speed_target`` (N,) m/s, the ground speed to fly with the advised heading
+    advises_speed: ClassVar[bool] = False
 
     params: object
 
@@ -339,6 +344,16 @@ CONSTRUCTOR_ARGS = {
 
 #: Keyword arguments a method of the kind must accept (the world passes them by name).
 KEYWORDS = {"resolver": {"resolve": ("mode_predictions", "turn_rate")}}
+#: Keyword arguments a method must accept when the class sets a capability flag (the world
+#: passes them by name only then).
+FLAG_KEYWORDS = {
+    "resolver": {
+        "uses_committed_side": ("resolve", ("committed_side",)),
+        "uses_held_heading": ("resolve", ("held_heading_change",)),
+        "uses_intruder_turn_rate": ("resolve", ("intruder_turn_rate",)),
+        "advises_speed": ("resolve", ("speed_limits", "max_acceleration")),
+    }
+}
 
 
 def _accepts(func, n_positional: int, keywords=()) -> str | None:
@@ -386,7 +401,8 @@ def check(kind: str, cls, name: str) -> None:
 
     Checks that it is a class, has every method and property of the protocol, that its
     constructor takes the kind's arguments (:data:`CONSTRUCTOR_ARGS`) and its methods the
-    keywords the world passes (:data:`KEYWORDS`), that ``Params`` is a dataclass and that the
+    keywords the world passes (:data:`KEYWORDS`, and :data:`FLAG_KEYWORDS` for the flags it
+    sets), that ``Params`` is a dataclass and that the
     capability flags are booleans. Done once, at registration, never at run time.
     """
     base = KINDS[kind]
@@ -415,6 +431,15 @@ def check(kind: str, cls, name: str) -> None:
             raise UserError(
                 f"{where}: does not fit the {base.__name__} protocol: {method}() must accept "
                 f"the keyword arguments {', '.join(keywords)}: {problem}"
+            )
+    for flag, (method, keywords) in FLAG_KEYWORDS.get(kind, {}).items():
+        if getattr(cls, flag, False) is not True:
+            continue
+        problem = _accepts(getattr(cls, method), 6 if method == "resolve" else 0, keywords)
+        if problem:
+            raise UserError(
+                f"{where}: does not fit the {base.__name__} protocol: with {flag}, {method}() "
+                f"must accept the keyword arguments {', '.join(keywords)}: {problem}"
             )
     params = getattr(cls, "Params", NoParams)
     if not (inspect.isclass(params) and dataclasses.is_dataclass(params)):

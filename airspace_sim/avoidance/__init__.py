@@ -11,6 +11,10 @@
   co-rotated candidates and recovery by latest loss as options (issue 13, docs/resolvers.md).
 - :mod:`.mode_bands`: ``"bands-modes"``, bands whose candidates also clear each likely IMM
   mode's predicted path.
+- :mod:`.flown_bands`: ``"bands-flown"`` and ``"bands-flown-turns"``, headings judged as flown
+  at the turn rate (the ring and dense scenarios' resolver).
+- :mod:`.speed_bands`: ``"bands-flown-speed"``, ``"bands-flown"`` with speed as a second
+  control (:mod:`.cpa_speed`: the path turning and changing speed).
 
 Units: metres, seconds, radians; angles CCW positive (a negative heading change is a right
 turn); relative quantities are intruder minus ownship.

@@ -391,6 +391,8 @@ class FlownBandsResolver(BandsResolver):
         committed_side=None,
         held_heading_change=None,
         intruder_turn_rate=None,
+        speed_limits=None,
+        max_acceleration=None,
     ):
         p = self.params
         vo, r, v, valid, mx = _arrays(
@@ -428,6 +430,10 @@ class FlownBandsResolver(BandsResolver):
                     turn_s,
                 )
                 flown[rows] = np.where(usable[rows], np.minimum(flown[rows], turned), -np.inf)
+        flown, speeds = self.speed_axis(
+            flown, conflict, vo, r, v, valid, safe, usable, radius, turn_rate,
+            speed_limits, max_acceleration,
+        )  # fmt: skip
         wanted = wanted_sides(committed_side, n)
         if self.params.fresh_sides_only:
             first, best = fresh_flown_sides(cand, clear, flown, wanted, committed_side)
@@ -481,7 +487,17 @@ class FlownBandsResolver(BandsResolver):
             min_ratio=flown,
             first_clear=first,
             best_blocked=best,
+            speed_target=None if speeds is None else speeds[idx, choice],
+            candidate_speed=speeds,
         )
+
+    def speed_axis(
+        self, flown, conflict, vo, r, v, valid, safe, usable, radius, turn_rate, limits, accel
+    ):
+        """``(flown, None)``: this resolver changes headings only
+        (:class:`~airspace_sim.avoidance.speed_bands.SpeedFlownBandsResolver` returns each
+        candidate's ratio with its best speed and that speed, (N, C) m/s)."""
+        return flown, None
 
     def intruder_turns(self, n, k, turn_rate, intruder_turn_rate):
         """None: this resolver predicts intruders straight (:class:`TurnAwareFlownBandsResolver`

@@ -87,6 +87,10 @@ class ResolverOutput:
         (``ψ ≤ 0``, ``ψ ≥ 0``) with no clear candidate, its candidate of largest minimum CPA
         ratio (−1 elsewhere). With ``candidates``, what a CDA policy needs to commit a turn
         side (resolvers with ``reports_band``).
+    speed_target : (N,) m/s, the ground speed to fly with ``heading_change`` (resolvers with
+        ``advises_speed``; NaN: no speed advice), or ``None``; candidate_speed : (N, C) m/s,
+        the ground speed to fly with each candidate (with ``reports_band``: the CDA policy
+        takes the one of the candidate it commits), or ``None``.
     """
 
     heading_change: np.ndarray
@@ -97,6 +101,8 @@ class ResolverOutput:
     min_ratio: np.ndarray | None = None
     first_clear: np.ndarray | None = None
     best_blocked: np.ndarray | None = None
+    speed_target: np.ndarray | None = None
+    candidate_speed: np.ndarray | None = None
 
 
 def _arrays(own_velocity, rel_position, rel_velocity, valid, max_heading_change):

@@ -176,6 +176,8 @@ MAX_COORDINATE_M = 1e8  #: positions and waypoints
 MAX_SPEED = 1000.0  #: m/s (about Mach 3)
 #: m/s: slower is not flight, and a speed of 5e-324 m/s made path metrics 0 / 0
 MIN_SPEED = 1.0
+MAX_SPEED_RANGE = 0.9  #: the advised speed stays at 10% of the aircraft's own or more
+MAX_ACCELERATION = 100.0  #: m/s², about 10 g
 MAX_TIME_S = 1e7  #: durations and time constants: about 4 months
 MAX_LOOKAHEAD_S = 3600.0
 MAX_STEPS = 10_000_000  #: duration / dt
@@ -234,6 +236,8 @@ RANGES: dict[str, Callable[[Any], str | None]] = {
     "AircraftSpec.speed": _range(MIN_SPEED, MAX_SPEED, unit="m/s"),
     "AircraftSpec.autopilot": _one_of_registry("autopilot"),
     "AircraftSpec.max_turn_rate_deg": _range(0, 3600.0, unit="deg/s"),
+    "AircraftSpec.speed_range": _range(0, MAX_SPEED_RANGE),
+    "AircraftSpec.max_acceleration": _range(0, MAX_ACCELERATION, lo_open=True, unit="m/s²"),
     "RecordedSpec.start_s": _range(0, MAX_TIME_S, unit="s"),
     "RecordedSpec.centre_lat_deg": _range(-90.0, 90.0, unit="deg"),
     "RecordedSpec.centre_lon_deg": _range(-180.0, 180.0, unit="deg"),
@@ -250,6 +254,8 @@ RANGES: dict[str, Callable[[Any], str | None]] = {
     "TrafficSpec.speed_spread": _range(0, MAX_SPEED, unit="m/s"),
     "TrafficSpec.autopilot": _one_of_registry("autopilot"),
     "TrafficSpec.max_turn_rate_deg": _range(0, 3600.0, unit="deg/s"),
+    "TrafficSpec.speed_range": _range(0, MAX_SPEED_RANGE),
+    "TrafficSpec.max_acceleration": _range(0, MAX_ACCELERATION, lo_open=True, unit="m/s²"),
     "TrafficSpec.controlled": NON_NEGATIVE_INT,
     "RandomiseSpec.radius": _interval(1.0, MAX_DISTANCE_M, "m"),
     "RandomiseSpec.phase_deg": _interval(-360.0, 360.0, "deg"),

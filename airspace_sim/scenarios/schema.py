@@ -117,6 +117,10 @@ class AircraftSpec:
     waypoints: list[tuple[float, float]] = field(default_factory=list)  #: metres, for "route"
     controlled: bool = False  #: an RL agent in the PettingZoo env
     max_turn_rate_deg: float = 3.0  #: turn-rate limit in degrees per second
+    #: fraction of its speed the resolver may take off or add (0: heading only; a resolver
+    #: with ``advises_speed`` uses it)
+    speed_range: float = 0.0
+    max_acceleration: float = 0.5  #: along-track acceleration limit in m/s²
     avoid: bool = True  #: runs the resolver (background traffic may be non-cooperative)
     #: what a "recorded" autopilot flies (an :class:`airspace_sim.recorded.autopilot.Recording`;
     #: set from a [recorded] section, never read from a file)
@@ -138,6 +142,9 @@ class TrafficSpec:
     speed_spread: float = 0.0  #: generated speeds uniform in speed ± speed_spread, m/s
     autopilot: str = "route"  #: autopilot of generated aircraft
     max_turn_rate_deg: float = 3.0  #: turn-rate limit in degrees per second
+    #: fraction of its speed the resolver may take off or add (0: heading only)
+    speed_range: float = 0.0
+    max_acceleration: float = 0.5  #: along-track acceleration limit in m/s²
     controlled: int = 0  #: how many generated aircraft are RL agents (the first ones)
 
 

@@ -141,6 +141,8 @@ def _spec(scenario, aid, pos, heading_rad, speed, waypoints=(), avoid=True) -> A
         autopilot=t.autopilot,
         waypoints=[(float(w[0]), float(w[1])) for w in waypoints],
         max_turn_rate_deg=t.max_turn_rate_deg,
+        speed_range=t.speed_range,
+        max_acceleration=t.max_acceleration,
         avoid=avoid,
     )
 

@@ -51,7 +51,8 @@ Safety-assurance metrics (DAIDALUS / ACAS X study conventions; ``docs/safety.md`
   the end of the run; a ``straight`` autopilot never arrives); aircraft taken out without
   finishing (the env's agents retired after an NMAC or truncation) are neither.
   ``arrival_delay_mean_s`` / ``arrival_delay_max_s`` over the arrived:
-  arrival time minus the planned straight time ``plan length / speed`` (a route is
+  arrival time minus the planned straight time ``plan length / speed`` (the aircraft's own
+  speed where the CDA policy may change it, else the last speed flown; a route is
   captured within one step's travel of its last waypoint, so an undisturbed flight has a
   delay in ``[−dt, 0]``); NaN when none arrived.
 
@@ -552,13 +553,18 @@ class WorldMetrics:
             self.mode_hits += int(np.count_nonzero(mode_est == mode_true))
             self.mode_samples += len(mode_est)
 
-    def report(self, steps: int, time: float, progress, has_plan) -> dict:
-        """The metrics dict; progress (N,) planned distance covered, m; has_plan (N,) bool."""
+    def report(self, steps: int, time: float, progress, has_plan, planned_speed=None) -> dict:
+        """The metrics dict; progress (N,) planned distance covered, m; has_plan (N,) bool;
+        planned_speed (N,) m/s, the speed the plan is timed at where finite (aircraft whose
+        speed the CDA policy may change), else the last speed flown."""
         extra = np.where(has_plan, self.flown - np.nan_to_num(progress), 0.0)
         planned = float(np.sum(np.where(has_plan, np.nan_to_num(progress), 0.0)))
         arrived = has_plan & np.isfinite(self.arrival)
+        speed = self.speed
+        if planned_speed is not None:
+            speed = np.where(np.isfinite(planned_speed), planned_speed, speed)
         with np.errstate(divide="ignore", invalid="ignore"):
-            delay = self.arrival[arrived] - np.asarray(progress)[arrived] / self.speed[arrived]
+            delay = self.arrival[arrived] - np.asarray(progress)[arrived] / speed[arrived]
         hours = self.flight_s / 3600.0
         return {
             "steps": int(steps),

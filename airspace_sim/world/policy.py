@@ -72,13 +72,20 @@ class AvoidancePolicy:
     held_heading : (N,) rad, the absolute heading advised at the last detection to an
         ownship in conflict (current heading + its chosen heading change), NaN elsewhere;
         given back to resolvers with ``uses_held_heading``.
+    speed_target : (N,) m/s, the ground speed a resolver with ``advises_speed`` advised with
+        the heading; set at each detection in conflict, kept while the aircraft flies the
+        policy (advice or a held heading), NaN (its own speed) once it flies its autopilot
+        again. The world flies it within the aircraft's acceleration limit.
+    speed_limits : (N, 2) m/s, the lowest and highest ground speed each aircraft may be
+        advised (equal: heading only); max_acceleration : (N,) m/s².
     r_safe, lookahead_s, margin : the resolver's clear radius ``r_safe·(1 + margin)`` and
         look-ahead, m, s, -.
     """
 
     PREFERENCES = ("right", "nearest", "none")
 
-    def __init__(self, scenario, dt: float, avoid, tracking):
+    def __init__(self, scenario, dt: float, avoid, tracking, speed_limits=None,
+                 max_acceleration=None):  # fmt: skip
         spec = scenario.resolver
         self.resolver = build_resolver(scenario)
         self.dt = float(dt)
@@ -115,15 +122,27 @@ class AvoidancePolicy:
         self.off_route_s = np.zeros(n)
         self.following = np.zeros(n, dtype=bool)
         self.held_heading = np.full(n, np.nan)
+        self.speed_target = np.full(n, np.nan)
+        self.speed_limits = (
+            np.zeros((n, 2)) if speed_limits is None else np.array(speed_limits, dtype=float)
+        )
+        self.max_acceleration = (
+            np.zeros(n) if max_acceleration is None else np.array(max_acceleration, dtype=float)
+        )
         self._clear_for = np.zeros(n, dtype=np.int64)
         self._encounters = Encounters.empty()
 
     def __setstate__(self, state):
-        """Unpickle; a checkpoint from before ``held_heading`` and ``resume_margin_floor``
-        holds no held heading (NaN) and a floor of 0."""
+        """Unpickle; a checkpoint from before ``held_heading``, ``resume_margin_floor`` and
+        speed advice holds no held heading (NaN), a floor of 0 and no speed advice."""
+        n = np.asarray(state["advice"]).size
         if "held_heading" not in state:
-            state["held_heading"] = np.full(np.asarray(state["advice"]).size, np.nan)
+            state["held_heading"] = np.full(n, np.nan)
         state.setdefault("resume_margin_floor", 0.0)
+        if "speed_target" not in state:
+            state["speed_target"] = np.full(n, np.nan)
+            state["speed_limits"] = np.zeros((n, 2))
+            state["max_acceleration"] = np.zeros(n)
         self.__dict__.update(state)
 
     # ------------------------------------------------------------- commands
@@ -170,6 +189,8 @@ class AvoidancePolicy:
                         out[cut] = np.where(frac[part] > 0.0, rate[cut] * frac[part], 0.0)
                         follow[cut] = True
         self.following = follow
+        # the advised speed is flown with the advice and the held heading, not the route
+        self.speed_target[~follow] = np.nan
         if anyone:
             self.off_route_s = np.where(follow | resuming, self.off_route_s + self.dt, 0.0)
         else:  # nobody follows or resumes
@@ -314,6 +335,9 @@ class AvoidancePolicy:
             if res.uses_intruder_turn_rate:
                 omega = view.x[np.maximum(enc.rows, 0), 4]
                 given["intruder_turn_rate"] = np.where(enc.rows >= 0, np.nan_to_num(omega), 0.0)
+            if res.advises_speed:
+                given["speed_limits"] = self.speed_limits[enc.owners]
+                given["max_acceleration"] = self.max_acceleration[enc.owners]
             out = res.resolve(
                 velocities[enc.owners],
                 enc.rel_position,
@@ -338,6 +362,9 @@ class AvoidancePolicy:
             advice[enc.owners] = np.clip(psi, -mx, mx)
             conflict[enc.owners] = c
             held[enc.owners] = np.where(c, heading + psi, np.nan)
+            if res.advises_speed:
+                speed = self._advised_speed(out, psi)
+                self.speed_target[enc.owners] = np.where(c, speed, self.speed_target[enc.owners])
         conflict &= active
         # forget the committed side once clear for side_memory_s
         self._clear_for = np.where(conflict, 0, self._clear_for + 1)
@@ -345,6 +372,23 @@ class AvoidancePolicy:
         self.advice, self.conflict = advice, conflict
         self.held_heading = np.where(conflict, held, np.nan)
         return advice, conflict
+
+    @staticmethod
+    def _advised_speed(out, psi):
+        """(n,) m/s: the speed a resolver with ``advises_speed`` gives for the heading change
+        ``psi`` (n,) rad the policy flies: its ``candidate_speed`` (n, C) at that candidate
+        when it reports one (the committed side may pick another candidate than the
+        resolver's own choice), else its ``speed_target``."""
+        speed = np.asarray(out.speed_target, dtype=float)
+        per = out.candidate_speed
+        if per is None or out.candidates is None:
+            return speed
+        cand = np.asarray(out.candidates, dtype=float)
+        gap = np.where(np.isfinite(cand), np.abs(cand - psi[:, None]), np.inf)
+        at = np.argmin(gap, axis=1)
+        rows = np.arange(psi.size)
+        exact = gap[rows, at] <= 1e-12
+        return np.where(exact, np.asarray(per, dtype=float)[rows, at], speed)
 
     def _prefilter(self, enc: Encounters, velocities) -> Encounters:
         """Only the ownships whose current heading fails the resolver's own CPA test, and on

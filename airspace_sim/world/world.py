@@ -13,7 +13,9 @@ earlier one and no part calls back into the world (``docs/dataflow.md``):
    (:class:`~.policy.AvoidancePolicy`: advice while in conflict, a held heading while a turn
    back to the route is not clear), then the RL agents' finite ``heading_rate``; each turn
    rate clipped to the aircraft's ``max_turn_rate``;
-2. motion: constant speed, heading ``h → h + ω·dt``; the body flies the chord of that arc
+   aircraft that may change speed (``AircraftSpec.speed_range`` > 0) take the policy's
+   advised speed (their own otherwise) within ``max_acceleration``;
+2. motion: the step's speed, heading ``h → h + ω·dt``; the body flies the chord of that arc
    (velocity ``v·sinc(ωdt/2)`` at heading ``h + ωdt/2``), integrated as chipmunk does
    (``p + v·dt``) by the airspace (:mod:`.bodies`): pymunk's sensor circles (the largest
    distance plus a margin) give candidate pairs, found again when an aircraft may have
@@ -70,7 +72,10 @@ class World:
     ------------------------------------------------------------------------------------
     dt, time : s.  step_count : int.  ids : list[str] (N).
     positions (N, 2) m; velocities (N, 2) m/s; headings (N,) rad CCW from east;
-    speeds (N,) m/s; max_turn_rate (N,) rad/s; turn_rates (N,) rad/s flown in the last step;
+    speeds (N,) m/s; nominal_speeds (N,) m/s, each aircraft's own (the scenario's) speed,
+    which it keeps unless the CDA policy advises another; speed_range (N,) the fraction of it
+    the policy may take off or add (0: heading only); max_acceleration (N,) m/s²;
+    max_turn_rate (N,) rad/s; turn_rates (N,) rad/s flown in the last step;
     active, controlled, avoid (N,) bool; modes (N,) int true Markov mode over the last step
     (−1 for non-Markov aircraft); in_los, nmac (N,) bool; advice (N,) rad resolver heading
     change for the coming step; conflict (N,) bool; r_safe, nmac_distance, sensor_range (m)
@@ -96,6 +101,9 @@ class World:
         self.positions = np.array([a.position for a in self.specs], dtype=float).reshape(n, 2)
         self.headings = wrap_angle(np.radians([a.heading_deg for a in self.specs]))
         self.speeds = np.array([a.speed for a in self.specs], dtype=float)
+        self.nominal_speeds = self.speeds.copy()
+        self.speed_range = np.array([a.speed_range for a in self.specs], dtype=float)
+        self.max_acceleration = np.array([a.max_acceleration for a in self.specs], dtype=float)
         self.max_turn_rate = np.radians([a.max_turn_rate_deg for a in self.specs]).astype(float)
         self.controlled = np.array([a.controlled for a in self.specs], dtype=bool)
         self.avoid = np.array([a.avoid for a in self.specs], dtype=bool)
@@ -153,8 +161,13 @@ class World:
             params=sc.tracker.params,
         )
         self.trackers_on = self.controlled | self.avoid  # ownships that track intruders
+        flies_advice = self.avoid & ~self.controlled & ~self.moved
+        #: (N,) bool: aircraft whose speed the CDA policy may change
+        self.speed_controlled = flies_advice & (self.speed_range > 0.0)
+        span = np.where(self.speed_controlled, self.speed_range, 0.0) * self.nominal_speeds
+        limits = np.stack([self.nominal_speeds - span, self.nominal_speeds + span], axis=1)
         self.policy = AvoidancePolicy(
-            sc, dt, self.avoid & ~self.controlled & ~self.moved, self.trackers_on
+            sc, dt, flies_advice, self.trackers_on, limits, self.max_acceleration
         )
         self.metrics_acc = WorldMetrics(n, self.r_safe, self.nmac_distance, dt)
         self.active[self.moved] = False  # kinematic aircraft come in where recorded now
@@ -179,6 +192,11 @@ class World:
         self.__dict__.update(state)
         if "_one_route" not in state:
             self._one_route = self._only_route(self.autopilots, self.n)
+        if "nominal_speeds" not in state:  # before speed advice: every speed is its own
+            self.nominal_speeds = np.array([a.speed for a in self.specs], dtype=float)
+            self.speed_range = np.zeros(self.n)
+            self.max_acceleration = np.zeros(self.n)
+            self.speed_controlled = np.zeros(self.n, dtype=bool)
 
     @staticmethod
     def _only_route(autopilots, n):
@@ -270,7 +288,21 @@ class World:
         )
         out = np.empty(n)
         flight.turn_commands(rate, hr, agent, self.max_turn_rate, self.active, out)
+        if self.speed_controlled.any():
+            self._speed_commands()
         return out
+
+    def _speed_commands(self) -> None:
+        """Phase 1, speed: each speed-controlled aircraft's speed for the coming step, the
+        CDA policy's advised speed (its own where there is none, clipped to its limits)
+        approached by at most ``max_acceleration·dt``."""
+        target = self.policy.speed_target
+        target = np.where(np.isfinite(target), target, self.nominal_speeds)
+        lo, hi = self.policy.speed_limits[:, 0], self.policy.speed_limits[:, 1]
+        step = self.max_acceleration * self.dt
+        change = np.clip(np.clip(target, lo, hi) - self.speeds, -step, step)
+        m = self.speed_controlled & self.active
+        self.speeds = np.where(m, self.speeds + change, self.speeds)
 
     def _motion(self, rate) -> None:
         """Phase 2: fly the chord of each arc for ``dt``; finished route aircraft leave."""
@@ -511,7 +543,11 @@ class World:
         ``wcv_duration_s``, ``induced_los_pairs``, ``flight_hours``,
         ``alerts_per_flight_hour``, ``first_alert_s``, ``arrived``, ``not_arrived``,
         ``arrival_delay_mean_s``, ``arrival_delay_max_s``."""
-        return self.metrics_acc.report(self.step_count, self.time, self.progress(), self._has_plan)
+        # a slowed aircraft's delay is against its own speed, not the speed it arrived at
+        planned = np.where(self.speed_controlled, self.nominal_speeds, np.nan)
+        return self.metrics_acc.report(
+            self.step_count, self.time, self.progress(), self._has_plan, planned
+        )
 
     def snapshot(self, prediction_points: int = snapshots.PREDICTION_POINTS):
         """The world now, as a read-only :class:`~airspace_sim.world.snapshot.Snapshot`."""
