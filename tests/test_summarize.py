@@ -46,3 +46,16 @@ def test_rows_group_by_configuration_not_by_seed_range():
     assert plain["extra_path_pct"] == pytest.approx(11.0)
     assert out[("dense", "k", "", "resolver.margin=0.2")]["los_pairs"] == 1
     assert out[("ring:64", "k", "", "")]["los_per_seed_95"][0] == 0.0
+
+
+def test_arrival_delay_is_averaged_over_the_runs_that_report_one():
+    rows = [
+        _row("dense:0-2", 0, 0, arrival_delay_mean_s=10.0),
+        _row("dense:0-2", 1, 0, arrival_delay_mean_s=30.0),
+        _row("dense:0-2", 2, 0, arrival_delay_mean_s=float("nan")),  # no aircraft arrived
+        _row("dense:3", 3, 0),  # a line from before the field existed
+    ]
+    ((_, s),) = summarize(rows)
+    assert s["arrival_delay_mean_s"] == pytest.approx(20.0)
+    ((_, old),) = summarize([_row("dense:3", 3, 0)])
+    assert old["arrival_delay_mean_s"] != old["arrival_delay_mean_s"]  # NaN

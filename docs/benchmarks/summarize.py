@@ -5,7 +5,7 @@
 
 A configuration is (case without its seeds, kind, policy, set). For each it prints the seeds,
 the LoS pairs in all and per seed where any, the interval of the mean LoS pairs per seed
-(Poisson counts), NMAC pairs, mean extra path % and mean not arrived. Two rows whose intervals
+(Poisson counts), NMAC pairs, mean extra path %, mean not arrived and mean arrival delay (s). Two rows whose intervals
 overlap widely are not told apart by their seeds: in the tenth part of docs/resolvers.md a
 change that left the rule alone moved 3 of 5 dense losses to other seeds.
 """
@@ -57,10 +57,18 @@ def summarize(rows):
                     "nmac_pairs": sum(r["nmac_pairs"] for r in runs),
                     "extra_path_pct": sum(r["extra_path_pct"] for r in runs) / len(runs),
                     "not_arrived": sum(r["not_arrived"] for r in runs) / len(runs),
+                    "arrival_delay_mean_s": _mean(r.get("arrival_delay_mean_s") for r in runs),
                 },
             )
         )
     return out
+
+
+def _mean(values):
+    """Mean of the finite values, NaN when there are none (older lines lack some fields; a run
+    where no aircraft arrived has no delay)."""
+    vals = [v for v in values if v is not None and v == v]
+    return sum(vals) / len(vals) if vals else float("nan")
 
 
 def main(argv=None):
@@ -80,7 +88,8 @@ def main(argv=None):
             f"  {len(seeds)} seeds {seeds[0]}-{seeds[-1]}: {s['los_pairs']} LoS pairs "
             f"{s['los_by_seed'] or ''} ({lo:.2f}-{hi:.2f} per seed, 95%), "
             f"{s['nmac_pairs']} NMAC, {s['extra_path_pct']:.1f}% extra path, "
-            f"{s['not_arrived']:.1f} not arrived"
+            f"{s['not_arrived']:.1f} not arrived, {s['arrival_delay_mean_s']:.0f} s mean "
+            "arrival delay"
         )
     return 0
 
