@@ -42,3 +42,13 @@ def test_ring_of_64_with_bands_keeps_separation(seed):
     m = World(ring_scenario(64, seed=seed)).run()
     assert m["los_events"] == 0, m
     assert m["nmac_events"] == 0 and m["min_separation_m"] > 3000.0
+
+
+def test_ring_takes_scenario_overrides_and_refuses_bad_ones():
+    from airspace_sim.errors import UserError
+
+    sc = ring_scenario(8, overrides=("traffic.speed_range=0.1", 'resolver.kind="bands-flown"'))
+    assert sc.traffic.speed_range == 0.1 and sc.resolver.kind == "bands-flown"
+    assert all(a.speed_range == 0.1 for a in World(sc).specs)
+    with pytest.raises(UserError, match="speed_range"):
+        ring_scenario(8, overrides=("traffic.speed_range=2.0",))

@@ -40,6 +40,7 @@ def ring_scenario(
     sensor_range: float = 40000.0,
     duration: float | None = None,
     seed: int = 0,
+    overrides: tuple[str, ...] = (),
 ) -> Scenario:
     """``n`` aircraft evenly on a circle, all heading for the diametrically opposite point
     (the scenario generator's ``traffic.pattern = "ring"``, validated by the loader).
@@ -47,6 +48,7 @@ def ring_scenario(
     ``radius`` defaults to the smallest ring on which neighbours start 10% more than
     2·r_safe apart (``1.1·r_safe / sin(π/n)``), but at least 20 km. ``duration`` defaults
     to the straight crossing time plus 300 s. Route autopilot, 3°/s turn limit, all avoid.
+    ``overrides`` are ``--set KEY=VALUE`` strings applied on top (``traffic.speed_range=0.1``).
     """
     if radius is None:
         radius = max(1.1 * r_safe / math.sin(math.pi / n), 20000.0)
@@ -66,6 +68,7 @@ def ring_scenario(
             "traffic": {"pattern": "ring", "count": n, "radius": radius, "speed": speed},
         },
         source=f"<ring_scenario({n})>",
+        overrides=overrides,
     )
 
 

@@ -35,7 +35,7 @@ def scenario(case, kind, policy=(), overrides=()):
     knobs = {k: tomllib.loads(f"v = {v}")["v"] for k, _, v in (kv.partition("=") for kv in policy)}
     parts = case.split(":")
     if parts[0] == "ring":
-        sc = ring_scenario(int(parts[1]))
+        sc = ring_scenario(int(parts[1]), overrides=tuple(overrides))
     elif parts[0] == "scn":
         sc = load(parts[1], list(overrides))
     else:
@@ -56,7 +56,7 @@ def main(argv=None):
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="scenario override for scn: and dense: cases (as airspace-sim run --set)",
+        help="scenario override for every case (as airspace-sim run --set)",
     )
     ap.add_argument("--kinds", nargs="+", default=["bands", "bands-reciprocal"])
     ap.add_argument(
@@ -84,8 +84,8 @@ def main(argv=None):
                 t0 = time.perf_counter()
                 m = World(sc, seed=seed).run()
                 row = {"case": case, "kind": kind, "policy": " ".join(args.policy), "seed": seed}
-                if args.overrides and not case.startswith("ring:"):
-                    row["set"] = " ".join(args.overrides)  # what --set changed in the file
+                if args.overrides:
+                    row["set"] = " ".join(args.overrides)  # what --set changed in the case
                 row.update({k: m[k] for k in keys})
                 row["wall_s"] = round(time.perf_counter() - t0, 1)
                 print(json.dumps(row), flush=True)
