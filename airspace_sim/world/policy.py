@@ -84,8 +84,9 @@ class AvoidancePolicy:
 
     PREFERENCES = ("right", "nearest", "none")
 
-    def __init__(self, scenario, dt: float, avoid, tracking, speed_limits=None,
-                 max_acceleration=None):  # fmt: skip
+    def __init__(
+        self, scenario, dt: float, avoid, tracking, speed_limits=None, max_acceleration=None
+    ):
         spec = scenario.resolver
         self.resolver = build_resolver(scenario)
         self.dt = float(dt)
