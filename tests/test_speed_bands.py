@@ -122,6 +122,35 @@ def test_without_a_speed_range_it_is_bands_flown(seed):
     np.testing.assert_allclose(out.speed_target, here, rtol=1e-15)
 
 
+@pytest.mark.parametrize("seed", [0, 1])
+def test_speed_when_boxed_changes_speed_only_for_ownships_with_no_heading_clear(seed):
+    """With ``speed_when_boxed`` a row with some heading clear as flown at its current speed
+    is "bands-flown"'s row at the current speed; a row with none is the row of the resolver
+    that always judges other speeds."""
+    vo, r, v, valid, mx, side = _random_scene(seed, n=200, k=8)
+    n = vo.shape[0]
+    here = np.hypot(vo[:, 0], vo[:, 1])
+    common = dict(turn_rate=np.full(n, RATE), committed_side=side)
+    base = FlownBandsResolver(FlownBandsResolver.Params(**K1)).resolve(
+        vo, r, v, valid, mx, **common
+    )
+    speed = dict(speed_limits=np.stack([0.8 * here, 1.2 * here], 1), max_acceleration=np.ones(n))
+
+    def run(**knobs):
+        params = SpeedFlownBandsResolver.Params(**K1, **knobs)
+        return SpeedFlownBandsResolver(params).resolve(vo, r, v, valid, mx, **common, **speed)
+
+    always, boxed_only = run(), run(speed_when_boxed=True)
+    usable = ~np.isnan(base.candidates)
+    boxed = base.conflict & ~np.any(usable & (base.min_ratio >= 1.0 - CLEAR_TOLERANCE), axis=1)
+    assert 0 < boxed.sum() < base.conflict.sum()
+    np.testing.assert_array_equal(boxed_only.heading_change[~boxed], base.heading_change[~boxed])
+    np.testing.assert_array_equal(boxed_only.speed_target[~boxed], here[~boxed])
+    np.testing.assert_array_equal(boxed_only.heading_change[boxed], always.heading_change[boxed])
+    np.testing.assert_array_equal(boxed_only.speed_target[boxed], always.speed_target[boxed])
+    assert np.any(boxed_only.speed_target[boxed] != here[boxed])
+
+
 def _straight_ratio(vo_new, r, vi, lookahead):
     """Closed-form minimum distance / radius over [0, lookahead] of straight relative motion."""
     v = vi - vo_new

@@ -12,7 +12,8 @@ nearest the current one; else the speed of largest as-flown ratio, when that bea
 current speed's by more than ``speed_margin``. Every rule of ``"bands-flown"`` (open sides,
 fallbacks for boxed ownships) then runs on those ratios, so a heading that is clear only at
 another speed counts as clear, and the first clear heading in the preference order may be
-ψ = 0 at another speed: a speed change instead of a turn.
+ψ = 0 at another speed: a speed change instead of a turn. With ``speed_when_boxed`` only an
+ownship with no heading clear as flown at its current speed is offered other speeds.
 
 The CDA policy flies the speed of the heading it commits (``candidate_speed``), keeps it while
 the aircraft flies the advice or a held heading, and lets the aircraft return to its own speed
@@ -86,6 +87,11 @@ class SpeedFlownBandsResolver(FlownBandsResolver):
             "needs over the current one to be advised",
             ge=0.0,
         )
+        speed_when_boxed: bool = param(
+            False,
+            doc="judge other speeds only for an ownship with no heading clear as flown at its "
+            "current speed (speed as the boxed ownship's way out; a heading change first)",
+        )
 
     advises_speed = True
 
@@ -100,7 +106,10 @@ class SpeedFlownBandsResolver(FlownBandsResolver):
         if limits is None or accel is None or r.shape[1] == 0:
             return flown, speeds
         limits = np.asarray(limits, dtype=float).reshape(n, 2)
-        rows = np.flatnonzero(conflict & (limits[:, 1] > limits[:, 0]))
+        wanted = conflict & (limits[:, 1] > limits[:, 0])
+        if self.params.speed_when_boxed:
+            wanted &= ~np.any(np.where(usable, flown, -np.inf) >= 1.0 - CLEAR_TOLERANCE, axis=1)
+        rows = np.flatnonzero(wanted)
         if rows.size == 0:
             return flown, speeds
         rate = DEFAULT_TURN_RATE if turn_rate is None else turn_rate
