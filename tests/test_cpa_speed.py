@@ -1,6 +1,6 @@
 """Minimum distance with the ownship turning and changing speed (avoidance/cpa_speed.py)
 against a brute-force oracle (the path's velocity integrated by the trapezoid rule every 5 ms),
-the closed-form straight CPA, and the turning kernel at constant speed."""
+the closed-form straight CPA, and the turning kernel at constant speed; the knots' spacing."""
 
 import math
 
@@ -9,7 +9,7 @@ import pytest
 
 from airspace_sim.avoidance.cpa import cpa_min_ratio
 from airspace_sim.avoidance.cpa_intruder_turning import cpa_min_ratio_intruder_turning
-from airspace_sim.avoidance.cpa_speed import _piece, cpa_min_ratio_speed
+from airspace_sim.avoidance.cpa_speed import _knots, _piece, cpa_min_ratio_speed
 
 RATE = math.radians(3.0)
 RADIUS = 3300.0
@@ -71,7 +71,8 @@ def test_piece_is_the_integral_through_small_turns():
 
 
 def test_current_speed_is_the_turning_kernel():
-    """Target speed = current speed: the ownship-only turning path, sampled alike."""
+    """Target speed = current speed: the ownship-only turning path (sampled every second
+    there, at the chord tolerance here: both within 2 m of the arc)."""
     vo, r, v, valid, cand, _ = _scene(3)
     n, k = valid.shape
     here = np.linalg.norm(vo, axis=1, keepdims=True)
@@ -80,7 +81,48 @@ def test_current_speed_is_the_turning_kernel():
     want = cpa_min_ratio_intruder_turning(
         vo, r, v, valid, cand, RADIUS, 90.0, rate, np.zeros((n, k)), 0.0
     )
-    np.testing.assert_allclose(got[:, :, 0], want, atol=1e-6)
+    np.testing.assert_allclose(got[:, :, 0], want, atol=4.0 / RADIUS, rtol=0)
+
+
+@pytest.mark.parametrize("tolerance_m", [0.25, 8.0])
+def test_the_chord_tolerance_bounds_the_error(tolerance_m):
+    """Against the integrated oracle the error stays within the tolerance asked for (the
+    minimum distance moves by at most the path's distance from its chords)."""
+    vo, r, v, valid, cand, speeds = _scene(6)
+    n = vo.shape[0]
+    rate, acc = np.full(n, RATE), np.full(n, 1.0)
+    got = cpa_min_ratio_speed(
+        vo, r, v, valid, cand, speeds, RADIUS, 60.0, rate, acc, tolerance_m=tolerance_m
+    )
+    want = _oracle(vo, r, v, valid, cand, speeds, 1.0, 60.0)
+    err = np.abs(got - want)[np.isfinite(want)] * RADIUS
+    assert err.max() <= tolerance_m + 0.05
+
+
+@pytest.mark.parametrize(
+    "s0, s1, rate, tau_h, a, tau_s, lookahead",
+    [
+        (230.0, 260.0, RATE, 20.0, 0.5, 60.0, 120.0),  # turn ends first
+        (207.7, 269.6, RATE, 23.4, 3.0, 20.6, 60.0),  # speed change ends first
+        (230.0, 230.0, 0.0, 0.0, 0.0, 0.0, 120.0),  # straight: two knots
+        (230.0, 200.0, -RATE, 50.0, -0.5, 60.0, 40.0),  # cut by the look-ahead
+    ],
+)
+def test_knots_end_each_phase_and_keep_to_the_tolerance(s0, s1, rate, tau_h, a, tau_s, lookahead):
+    tol = 2.0
+    buf = np.empty(4096)
+    m = _knots(s0, s1, rate, tau_h, a, tau_s, lookahead, tol, buf)
+    t = buf[:m]
+    assert t[0] == 0.0 and t[-1] == lookahead and np.all(np.diff(t) > 0.0)
+    for end in (tau_h, tau_s):
+        if 0.0 < end < lookahead:
+            assert np.any(np.abs(t - end) < 1e-12)
+    # within the manoeuvre each gap keeps g·Δt²/8 ≤ tol, g the phase's largest acceleration
+    mid = 0.5 * (t[1:] + t[:-1])
+    g = np.hypot(np.where(mid < tau_h, max(s0, s1) * rate, 0.0), np.where(mid < tau_s, a, 0.0))
+    manoeuvre = mid < min(max(tau_h, tau_s), lookahead)
+    assert np.all(g[manoeuvre] * np.diff(t)[manoeuvre] ** 2 / 8.0 <= tol * (1 + 1e-9))
+    assert np.count_nonzero(~manoeuvre) <= 1  # one straight piece to the look-ahead
 
 
 def test_at_once_is_the_closed_form_cpa():
