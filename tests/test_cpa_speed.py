@@ -151,3 +151,5 @@ def test_nan_candidates_and_no_intruders():
         vo, r[:, :0], v[:, :0], valid[:, :0], cand[:, 1:], speeds, RADIUS, 30.0, RATE, 0.5
     )
     assert none.shape == (n, cand.shape[1] - 1, speeds.shape[1]) and np.isinf(none).all()
+    with pytest.raises(ValueError, match="tolerance_m"):
+        cpa_min_ratio_speed(vo, r, v, valid, cand, speeds, RADIUS, 30.0, RATE, 0.5, tolerance_m=0)

@@ -71,6 +71,8 @@ def cpa_min_ratio_speed(
     w = kernel_array(turn_rate, (n,))
     acc = kernel_array(acceleration, (n,))
     tol = float(tolerance_m)
+    if not tol > 0.0:
+        raise ValueError(f"tolerance_m must be > 0 m, got {tolerance_m!r}")
     return _kernel(vo, r, v, valid, psi, sp, radius, float(lookahead_s), w, acc, tol)
 
 
