@@ -5,15 +5,16 @@
 
 A configuration is (case without its seeds, kind, policy, set). For each it prints the seeds,
 the LoS pairs in all and per seed where any, the interval of the mean LoS pairs per seed
-(Poisson counts), NMAC pairs, mean extra path %, mean not arrived and mean arrival delay (s). Two rows whose intervals
-overlap widely are not told apart by their seeds: in the tenth part of docs/resolvers.md a
-change that left the rule alone moved 3 of 5 dense losses to other seeds.
+(Poisson counts), NMAC pairs, mean extra path %, mean not arrived and mean arrival delay (s).
+Two rows whose intervals overlap widely are not told apart by their seeds: in the tenth part of
+docs/resolvers.md a change that left the rule alone moved 3 of 5 dense losses to other seeds.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 
 from scipy.stats import chi2
@@ -67,7 +68,7 @@ def summarize(rows):
 def _mean(values):
     """Mean of the finite values, NaN when there are none (older lines lack some fields; a run
     where no aircraft arrived has no delay)."""
-    vals = [v for v in values if v is not None and v == v]
+    vals = [v for v in values if v is not None and not math.isnan(v)]
     return sum(vals) / len(vals) if vals else float("nan")
 
 
