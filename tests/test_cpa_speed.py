@@ -9,7 +9,7 @@ import pytest
 
 from airspace_sim.avoidance.cpa import cpa_min_ratio
 from airspace_sim.avoidance.cpa_intruder_turning import cpa_min_ratio_intruder_turning
-from airspace_sim.avoidance.cpa_speed import _knots, _piece, cpa_min_ratio_speed
+from airspace_sim.avoidance.cpa_speed import _knot_bound, _knots, _piece, cpa_min_ratio_speed
 
 RATE = math.radians(3.0)
 RADIUS = 3300.0
@@ -123,6 +123,11 @@ def test_knots_end_each_phase_and_keep_to_the_tolerance(s0, s1, rate, tau_h, a, 
     manoeuvre = mid < min(max(tau_h, tau_s), lookahead)
     assert np.all(g[manoeuvre] * np.diff(t)[manoeuvre] ** 2 / 8.0 <= tol * (1 + 1e-9))
     assert np.count_nonzero(~manoeuvre) <= 1  # one straight piece to the look-ahead
+    # the kernel's buffer, sized once per call, holds them
+    one = np.ones(1)
+    assert m <= _knot_bound(
+        np.array([[s0, 0.0]]), s1 * one, abs(rate) * one, abs(a) * one, lookahead, tol
+    )
 
 
 def test_at_once_is_the_closed_form_cpa():

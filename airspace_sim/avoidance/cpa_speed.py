@@ -25,6 +25,8 @@ helpers in other modules). Distances m, velocities m/s, times s, angles rad CCW 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -73,7 +75,25 @@ def cpa_min_ratio_speed(
     tol = float(tolerance_m)
     if not tol > 0.0:
         raise ValueError(f"tolerance_m must be > 0 m, got {tolerance_m!r}")
-    return _kernel(vo, r, v, valid, psi, sp, radius, float(lookahead_s), w, acc, tol)
+    size = _knot_bound(vo, sp, w, acc, float(lookahead_s), tol)
+    return _kernel(vo, r, v, valid, psi, sp, radius, float(lookahead_s), w, acc, tol, size)
+
+
+def _knot_bound(vo, speeds, turn_rate, acceleration, lookahead_s, tol):
+    """An upper bound on the knots of any path of the call (:func:`_knots`): the steps over the
+    look-ahead at the largest path acceleration of the call, one more per phase, the first
+    knot and the look-ahead."""
+    s_max = max(_largest(np.hypot(vo[:, 0], vo[:, 1])), _largest(speeds))
+    g = math.hypot(s_max * _largest(turn_rate), _largest(acceleration))
+    steps = math.ceil(lookahead_s / math.sqrt(8.0 * tol / g)) if g > 0.0 else 0
+    return steps + 4
+
+
+def _largest(x):
+    """The largest finite positive entry of ``x`` (a turn rate or acceleration that is flown,
+    not taken at once), 0 if none."""
+    x = np.asarray(x, dtype=float)
+    return float(np.max(x[np.isfinite(x) & (x > 0.0)], initial=0.0))
 
 
 @njit(cache=True, error_model="numpy")
@@ -166,12 +186,11 @@ def _knots(s0, s1, rate, tau_h, a, tau_s, lookahead_s, tol, out):  # pragma: no 
 
 
 @njit(cache=True, error_model="numpy")
-def _kernel(vo, r, v, valid, psi, sp, radius, lookahead_s, w, acc, tol):  # pragma: no cover
+def _kernel(vo, r, v, valid, psi, sp, radius, lookahead_s, w, acc, tol, size):  # pragma: no cover
     n_own, n_cand = psi.shape
     n_speed = sp.shape[1]
     n_int = valid.shape[1]
     out = np.full((n_own, n_cand, n_speed), np.inf)
-    size = 8
     times = np.empty(size)
     own_x = np.empty(size)
     own_y = np.empty(size)
@@ -196,17 +215,6 @@ def _kernel(vo, r, v, valid, psi, sp, radius, lookahead_s, w, acc, tol):  # prag
                     a, tau_s, s_start = (acc[n] if s1 > s0 else -acc[n]), abs(s1 - s0) / acc[n], s0
                 else:
                     a, tau_s, s_start = 0.0, 0.0, s1
-                # room for every knot: the steps of each phase, the phase ends, the look-ahead
-                g = np.hypot(max(s0, s1) * rate, a)
-                need = 4
-                if g > 0.0:
-                    span = min(max(tau_h, tau_s), lookahead_s)
-                    need += 2 * (int(span / np.sqrt(8.0 * tol / g)) + 2)
-                if need > size:
-                    size = 2 * need
-                    times = np.empty(size)
-                    own_x = np.empty(size)
-                    own_y = np.empty(size)
                 m = _knots(s_start, s1, rate, tau_h, a, tau_s, lookahead_s, tol, times)
                 for s in range(m):
                     own_x[s], own_y[s] = _displacement(
