@@ -292,6 +292,10 @@ class Resolver(ABC):
     #: ``max_acceleration`` (N,) m/s², its along-track limit; the output carries
     #: ``speed_target`` (N,) m/s, the ground speed to fly with the advised heading
     advises_speed: ClassVar[bool] = False
+    #: :meth:`resolve` takes ``aircraft_ids`` (N,) int, the world's index of each row's
+    #: ownship, and ``intruder_ids`` (N, K) int, the aircraft each intruder slot tracks (−1:
+    #: none), so it can tell which rows are each other's intruders (explicit coordination)
+    uses_aircraft_ids: ClassVar[bool] = False
 
     params: object
 
@@ -352,6 +356,7 @@ FLAG_KEYWORDS = {
         "uses_held_heading": ("resolve", ("held_heading_change",)),
         "uses_intruder_turn_rate": ("resolve", ("intruder_turn_rate",)),
         "advises_speed": ("resolve", ("speed_limits", "max_acceleration")),
+        "uses_aircraft_ids": ("resolve", ("aircraft_ids", "intruder_ids")),
     }
 }
 

@@ -15,6 +15,8 @@
   at the turn rate (the ring and dense scenarios' resolver).
 - :mod:`.speed_bands`: ``"bands-flown-speed"``, ``"bands-flown"`` with speed as a second
   control (:mod:`.cpa_speed`: the path turning and changing speed).
+- :mod:`.paired_bands`: ``"bands-flown-paired"``, ``"bands-flown"`` whose boxed pairs pick
+  their headings together (explicit coordination of equipped aircraft).
 
 Units: metres, seconds, radians; angles CCW positive (a negative heading change is a right
 turn); relative quantities are intruder minus ownship.

@@ -40,8 +40,8 @@ def cpa_min_ratio_intruder_turning(
     m/s; valid (N, K) bool; candidates (N, C) heading changes ψ, rad (NaN: none, NaN out);
     radius m, scalar or (N, K); turn_rate (N,) rad/s, the ownship's (``inf`` or ≤ 0: it takes
     ψ at once); intruder_turn_rate (N, K) rad/s, each intruder's turn rate, flown for
-    ``intruder_turn_s`` s (0: straight) and then straight. The ownship flies an arc of radius
-    ``|v_o|/ω`` to ``heading + ψ`` (``|ψ|/ω`` s), then straight (as
+    ``intruder_turn_s`` s (scalar or (N, K); 0: straight), then straight. The ownship flies
+    an arc of radius ``|v_o|/ω`` to ``heading + ψ`` (``|ψ|/ω`` s), then straight (as
     :func:`~airspace_sim.avoidance.cpa_turning.cpa_min_ratio_turning`).
     """
     vo = np.ascontiguousarray(own_velocity, dtype=float)
@@ -52,6 +52,7 @@ def cpa_min_ratio_intruder_turning(
     radius = kernel_array(radius, valid.shape)
     w = kernel_array(turn_rate, (vo.shape[0],))
     wi = kernel_array(intruder_turn_rate, valid.shape)
+    turn_s = kernel_array(intruder_turn_s, valid.shape)
     return _kernel(
         vo,
         r,
@@ -62,7 +63,7 @@ def cpa_min_ratio_intruder_turning(
         float(lookahead_s),
         w,
         wi,
-        float(intruder_turn_s),
+        turn_s,
         float(step_s),
     )
 
@@ -118,7 +119,7 @@ def _kernel(vo, r, v, valid, psi, radius, lookahead_s, w, wi, turn_s, step_s):  
             viy = v[n, k, 1] + vo[n, 1]
             si, hi = np.hypot(vix, viy), np.arctan2(viy, vix)
             for s in range(n_s + 1):
-                ix, iy = _arc_then_straight(si, hi, wi[n, k], turn_s, times[s])
+                ix, iy = _arc_then_straight(si, hi, wi[n, k], turn_s[n, k], times[s])
                 int_x[k, s] = r[n, k, 0] + ix
                 int_y[k, s] = r[n, k, 1] + iy
         for c in range(n_cand):

@@ -393,6 +393,8 @@ class FlownBandsResolver(BandsResolver):
         intruder_turn_rate=None,
         speed_limits=None,
         max_acceleration=None,
+        aircraft_ids=None,
+        intruder_ids=None,
     ):
         p = self.params
         vo, r, v, valid, mx = _arrays(
@@ -475,6 +477,16 @@ class FlownBandsResolver(BandsResolver):
                 incumbent,
                 p.boxed_hold_margin,
             )
+        if aircraft_ids is not None and committed_side is not None:
+            best = self.coordinate(
+                best,
+                boxed_rows(first, usable, committed_side),
+                cand,
+                usable,
+                committed_side,
+                (vo, r, v, valid, radius, turn_rate),
+                (np.asarray(aircraft_ids), np.asarray(intruder_ids)),
+            )
         idx = np.arange(n)
         choice = band_choice(
             first, best, lambda i: np.where(i >= 0, flown[idx, np.maximum(i, 0)], -np.inf)
@@ -490,6 +502,12 @@ class FlownBandsResolver(BandsResolver):
             speed_target=None if speeds is None else speeds[idx, choice],
             candidate_speed=speeds,
         )
+
+    def coordinate(self, best, boxed, cand, usable, committed_side, geometry, ids):
+        """``best`` (N, 2): this resolver decides each row on its own picture
+        (:class:`~airspace_sim.avoidance.paired_bands.PairedFlownBandsResolver` picks boxed
+        pairs' headings together)."""
+        return best
 
     def speed_axis(
         self, flown, conflict, vo, r, v, valid, safe, usable, radius, turn_rate, limits, accel

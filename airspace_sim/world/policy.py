@@ -336,6 +336,11 @@ class AvoidancePolicy:
             if res.uses_intruder_turn_rate:
                 omega = view.x[np.maximum(enc.rows, 0), 4]
                 given["intruder_turn_rate"] = np.where(enc.rows >= 0, np.nan_to_num(omega), 0.0)
+            if res.uses_aircraft_ids:
+                given["aircraft_ids"] = enc.owners
+                given["intruder_ids"] = np.where(
+                    enc.rows >= 0, view.intruder[np.maximum(enc.rows, 0)], -1
+                )
             if res.advises_speed:
                 given["speed_limits"] = self.speed_limits[enc.owners]
                 given["max_acceleration"] = self.max_acceleration[enc.owners]
