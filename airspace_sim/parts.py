@@ -296,6 +296,10 @@ class Resolver(ABC):
     #: ownship, and ``intruder_ids`` (N, K) int, the aircraft each intruder slot tracks (−1:
     #: none), so it can tell which rows are each other's intruders (explicit coordination)
     uses_aircraft_ids: ClassVar[bool] = False
+    #: :meth:`resolve` takes ``intruder_intent`` (N, K) rad, the heading change from each
+    #: intruder track's heading to the heading that aircraft broadcasts it steers to (0: none
+    #: or straight), and ``intruder_turn_limit`` (N, K) rad/s, its turn-rate limit
+    uses_intruder_intent: ClassVar[bool] = False
 
     params: object
 
@@ -357,6 +361,7 @@ FLAG_KEYWORDS = {
         "uses_intruder_turn_rate": ("resolve", ("intruder_turn_rate",)),
         "advises_speed": ("resolve", ("speed_limits", "max_acceleration")),
         "uses_aircraft_ids": ("resolve", ("aircraft_ids", "intruder_ids")),
+        "uses_intruder_intent": ("resolve", ("intruder_intent", "intruder_turn_limit")),
     }
 }
 

@@ -145,6 +145,7 @@ def _import_builtins() -> None:
         "airspace_sim.avoidance.flown_bands",
         "airspace_sim.avoidance.speed_bands",
         "airspace_sim.avoidance.paired_bands",
+        "airspace_sim.avoidance.intent_bands",
         "airspace_sim.world.autopilots",
         "airspace_sim.recorded.autopilot",
         "airspace_sim.world.sensors",

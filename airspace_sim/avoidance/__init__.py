@@ -17,6 +17,8 @@
   control (:mod:`.cpa_speed`: the path turning and changing speed).
 - :mod:`.paired_bands`: ``"bands-flown-paired"``, ``"bands-flown"`` whose boxed pairs pick
   their headings together (explicit coordination of equipped aircraft).
+- :mod:`.intent_bands`: ``"bands-flown-intent"``, ``"bands-flown"`` with each equipped
+  intruder predicted along the heading it broadcasts it steers to (intent-based).
 
 Units: metres, seconds, radians; angles CCW positive (a negative heading change is a right
 turn); relative quantities are intruder minus ownship.

@@ -99,18 +99,22 @@ def wanted_sides(committed_side, n):
     return np.stack([side <= 0, side >= 0], axis=1)
 
 
-def at_once_ratios(own_velocity, rel_position, rel_velocity, valid, max_heading_change, params):
+def at_once_ratios(
+    own_velocity, rel_position, rel_velocity, valid, max_heading_change, params, radius=None
+):
     """``"bands"``' candidates judged at once, for resolvers that judge them further.
 
     Arrays as :func:`band_search`'s, already shaped ((N, 2), (N, K, 2), (N, K, 2), (N, K),
     (N,)); ``params`` a ``"bands"`` :class:`~airspace_sim.avoidance.resolvers.BandsResolver`
-    ``Params``. Returns ``(radius, candidates, usable, ratio, conflict)``: the padded radius
-    (m), the (N, C) candidates in preference order (NaN padding), where they are not
-    padding, their minimum CPA ratio if flown at once (``-inf`` on padding) and the (N,)
-    conflict flags of the straight test at ψ = 0.
+    ``Params``; ``radius`` (N, K) m, the clear radius per slot (None: the padded radius
+    ``r_safe·(1 + margin)``). Returns ``(radius, candidates, usable, ratio, conflict)``: the
+    clear radius (m), the (N, C) candidates in preference order (NaN padding), where they
+    are not padding, their minimum CPA ratio if flown at once (``-inf`` on padding) and the
+    (N,) conflict flags of the straight test at ψ = 0.
     """
     vo, r, v, p = own_velocity, rel_position, rel_velocity, params
-    radius = p.r_safe * (1.0 + p.margin)
+    if radius is None:
+        radius = p.r_safe * (1.0 + p.margin)
     extra = None
     if p.exact_candidates and r.shape[1] > 0:
         extra = exact_boundary_candidates(vo, r, v, valid, radius, p.lookahead_s)

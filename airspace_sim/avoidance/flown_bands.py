@@ -80,6 +80,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -98,6 +99,22 @@ from airspace_sim.parts import param
 
 #: rad/s: the ownship's turn rate when the caller gives none (the shipped 3°/s limit)
 DEFAULT_TURN_RATE = math.radians(3.0)
+
+
+class IntruderTurns(NamedTuple):
+    """How a resolver predicts its intruders' turns (:meth:`FlownBandsResolver.intruder_turns`).
+
+    rate (n,) rad/s, the ownship's turn rate; omega (n, k) rad/s, each intruder's turn rate,
+    flown for ``turn_s`` s (scalar or (n, k)), then straight; ``detects``: the conflict test
+    also uses the turned prediction (the world's prefilter then does not hold); ``replaces``:
+    a candidate's as-flown ratio is the turned prediction's alone (else the smaller of it and
+    the straight one's)."""
+
+    rate: np.ndarray
+    omega: np.ndarray
+    turn_s: object
+    detects: bool
+    replaces: bool
 
 
 def side_masks(candidates):
@@ -276,6 +293,12 @@ def best_of_both_when_boxed(
     return best
 
 
+def radius_rows(radius, rows):
+    """The clear radius of ``rows`` (an index array): ``radius`` itself when it is one
+    number for every slot, else its (N, K) array's rows."""
+    return radius if np.ndim(radius) == 0 else np.asarray(radius)[rows]
+
+
 def as_flown_on_rows(
     base,
     rows,
@@ -291,7 +314,8 @@ def as_flown_on_rows(
 ):
     """``base`` (N, C) with the ``rows`` (N,) bool replaced by the as-flown minimum CPA ratio
     over ``lookahead_s`` of the candidates ``safe`` (N, C) rad (−inf where not ``usable``
-    (N, C)); a new array. Arrays as in :func:`cpa_min_ratio_turning`; ``turn_rate`` rad/s,
+    (N, C)); a new array. Arrays as in :func:`cpa_min_ratio_turning` (``radius`` m, a number
+    or (N, K)); ``turn_rate`` rad/s,
     scalar or (N,), None: :data:`DEFAULT_TURN_RATE`."""
     out = np.array(base, dtype=float, copy=True)
     idx = np.flatnonzero(rows)
@@ -305,7 +329,7 @@ def as_flown_on_rows(
             rel_velocity[idx],
             valid[idx],
             safe[idx],
-            radius,
+            radius_rows(radius, idx),
             lookahead_s,
             rate_rows,
         )
@@ -395,20 +419,32 @@ class FlownBandsResolver(BandsResolver):
         max_acceleration=None,
         aircraft_ids=None,
         intruder_ids=None,
+        intruder_intent=None,
+        intruder_turn_limit=None,
     ):
         p = self.params
         vo, r, v, valid, mx = _arrays(
             own_velocity, rel_position, rel_velocity, valid, max_heading_change
         )
         n = vo.shape[0]
-        radius, cand, usable, ratio, conflict = at_once_ratios(vo, r, v, valid, mx, p)
+        radius, cand, usable, ratio, conflict = at_once_ratios(
+            vo, r, v, valid, mx, p, self.clear_radius(vo, r, v, valid)
+        )
         safe = np.where(usable, cand, 0.0)
         clear = usable & (ratio >= 1.0 - CLEAR_TOLERANCE)
-        turning = self.intruder_turns(vo.shape[0], r.shape[1], turn_rate, intruder_turn_rate)
-        if turning is not None:
-            rate, omega, turn_s = turning
+        turning = self.intruder_turns(
+            n,
+            r.shape[1],
+            turn_rate,
+            {
+                "turn_rate": intruder_turn_rate,
+                "intent": intruder_intent,
+                "turn_limit": intruder_turn_limit,
+            },
+        )
+        if turning is not None and turning.detects:
             ahead = cpa_min_ratio_intruder_turning(
-                vo, r, v, valid, np.zeros((n, 1)), radius, p.lookahead_s, rate, omega, turn_s
+                vo, r, v, valid, np.zeros((n, 1)), radius, p.lookahead_s, *turning[:3]
             )[:, 0]
             conflict = conflict | ~(ahead >= 1.0 - CLEAR_TOLERANCE)
         # as flown only where the choice matters (a clear ownship keeps ψ = 0): the at-once
@@ -417,6 +453,7 @@ class FlownBandsResolver(BandsResolver):
             ratio, conflict, vo, r, v, valid, safe, usable, radius, p.lookahead_s, turn_rate
         )
         if turning is not None:
+            rate, omega, turn_s = turning[:3]
             rows = np.flatnonzero(conflict)
             if rows.size:
                 turned = cpa_min_ratio_intruder_turning(
@@ -425,13 +462,15 @@ class FlownBandsResolver(BandsResolver):
                     v[rows],
                     valid[rows],
                     safe[rows],
-                    radius,
+                    radius_rows(radius, rows),
                     p.lookahead_s,
                     rate[rows],
                     omega[rows],
-                    turn_s,
+                    turn_s if np.ndim(turn_s) == 0 else turn_s[rows],
                 )
-                flown[rows] = np.where(usable[rows], np.minimum(flown[rows], turned), -np.inf)
+                if not turning.replaces:
+                    turned = np.minimum(flown[rows], turned)
+                flown[rows] = np.where(usable[rows], turned, -np.inf)
         flown, speeds = self.speed_axis(
             flown, conflict, vo, r, v, valid, safe, usable, radius, turn_rate,
             speed_limits, max_acceleration,
@@ -503,6 +542,11 @@ class FlownBandsResolver(BandsResolver):
             candidate_speed=speeds,
         )
 
+    def clear_radius(self, vo, r, v, valid):
+        """None: every slot is judged against ``r_safe·(1 + margin)`` (a subclass may return
+        an (N, K) clear radius, m)."""
+        return None
+
     def coordinate(self, best, boxed, cand, usable, committed_side, geometry, ids):
         """``best`` (N, 2): this resolver decides each row on its own picture
         (:class:`~airspace_sim.avoidance.paired_bands.PairedFlownBandsResolver` picks boxed
@@ -517,9 +561,12 @@ class FlownBandsResolver(BandsResolver):
         candidate's ratio with its best speed and that speed, (N, C) m/s)."""
         return flown, None
 
-    def intruder_turns(self, n, k, turn_rate, intruder_turn_rate):
+    def intruder_turns(self, n, k, turn_rate, intruders):
         """None: this resolver predicts intruders straight (:class:`TurnAwareFlownBandsResolver`
-        returns ``(turn_rate (n,), intruder_turn_rate (n, k), turn_s)``)."""
+        and :class:`~airspace_sim.avoidance.intent_bands.IntentFlownBandsResolver` return an
+        :class:`IntruderTurns`). ``intruders``: the keyword arguments ``intruder_turn_rate``,
+        ``intruder_intent`` and ``intruder_turn_limit`` of :meth:`resolve` by their last
+        word."""
         return None
 
 
@@ -551,10 +598,12 @@ class TurnAwareFlownBandsResolver(FlownBandsResolver):
     prefilter = False
     uses_intruder_turn_rate = True
 
-    def intruder_turns(self, n, k, turn_rate, intruder_turn_rate):
-        """``(turn_rate (n,), intruder_turn_rate (n, k), turn_s)`` rad/s, rad/s, s, or None
-        without intruders or turn rates."""
+    def intruder_turns(self, n, k, turn_rate, intruders):
+        """Each intruder turning at its track's rate for ``intruder_turn_s`` (also in the
+        conflict test; the straight prediction kept too), or None without intruders or turn
+        rates."""
         turn_s = self.params.intruder_turn_s
+        intruder_turn_rate = intruders["turn_rate"]
         if turn_s <= 0.0 or intruder_turn_rate is None or k == 0:
             return None
         rate = DEFAULT_TURN_RATE if turn_rate is None else turn_rate
@@ -562,4 +611,4 @@ class TurnAwareFlownBandsResolver(FlownBandsResolver):
         # a track's turn-rate estimate beyond the ownship's own limit is noise
         omega = np.nan_to_num(np.asarray(intruder_turn_rate, dtype=float))
         omega = np.clip(omega, -rate[:, None], rate[:, None])
-        return rate, omega, turn_s
+        return IntruderTurns(rate, omega, turn_s, detects=True, replaces=False)

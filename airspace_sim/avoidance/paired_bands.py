@@ -175,6 +175,7 @@ class PairedFlownBandsResolver(FlownBandsResolver):
         if boxed.sum() < 2:
             return best
         aircraft_ids, intruder_ids = ids
+        radius = np.broadcast_to(np.asarray(radius, dtype=float), valid.shape)
         urgency = cpa_pair_ratios(
             vo, r, v, valid, np.zeros((n, 1)), radius, self.params.lookahead_s
         )[:, :, 0]
@@ -188,12 +189,12 @@ class PairedFlownBandsResolver(FlownBandsResolver):
                 alone[slot] = False
                 ratio = cpa_min_ratio_turning(
                     vo[row : row + 1], r[row : row + 1], v[row : row + 1], alone[None],
-                    np.where(usable[row], cand[row], 0.0)[None], radius,
+                    np.where(usable[row], cand[row], 0.0)[None], radius[row : row + 1],
                     self.params.lookahead_s, rate[row : row + 1],
                 )[0]  # fmt: skip
                 others.append(np.where(usable[row], ratio, -np.inf))
             mutual = mutual_ratio(
-                vo[i], r[i, k], v[i, k], safe[i], safe[j], radius, self.params.lookahead_s,
+                vo[i], r[i, k], v[i, k], safe[i], safe[j], radius[i, k], self.params.lookahead_s,
                 rate[i], rate[j],
             )  # fmt: skip
             col_i, col_j = int(side[i] > 0), int(side[j] > 0)

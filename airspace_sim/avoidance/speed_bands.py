@@ -31,7 +31,11 @@ import numpy as np
 from airspace_sim import registry
 from airspace_sim.avoidance.bands import CLEAR_TOLERANCE
 from airspace_sim.avoidance.cpa_speed import cpa_min_ratio_speed
-from airspace_sim.avoidance.flown_bands import DEFAULT_TURN_RATE, FlownBandsResolver
+from airspace_sim.avoidance.flown_bands import (
+    DEFAULT_TURN_RATE,
+    FlownBandsResolver,
+    radius_rows,
+)
 from airspace_sim.parts import param
 
 
@@ -123,7 +127,7 @@ class SpeedFlownBandsResolver(FlownBandsResolver):
             valid[rows],
             safe[rows],
             grid,
-            radius,
+            radius_rows(radius, rows),
             self.params.lookahead_s,
             rate,
             acc,

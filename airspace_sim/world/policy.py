@@ -72,6 +72,12 @@ class AvoidancePolicy:
     held_heading : (N,) rad, the absolute heading advised at the last detection to an
         ownship in conflict (current heading + its chosen heading change), NaN elsewhere;
         given back to resolvers with ``uses_held_heading``.
+    intent_heading : (N,) rad, the absolute heading each aircraft flying the policy steers
+        to in the current step (its held advised heading while it follows the advice in
+        conflict, its current heading while it holds or part-resumes, its autopilot's desired
+        heading otherwise), NaN for aircraft that do not fly the policy or have no desired
+        heading: the intent an equipped aircraft broadcasts, given (as each intruder slot's
+        heading change from its track's heading) to resolvers with ``uses_intruder_intent``.
     speed_target : (N,) m/s, the ground speed a resolver with ``advises_speed`` advised with
         the heading; set at each detection in conflict, kept while the aircraft flies the
         policy (advice or a held heading), NaN (its own speed) once it flies its autopilot
@@ -123,6 +129,7 @@ class AvoidancePolicy:
         self.off_route_s = np.zeros(n)
         self.following = np.zeros(n, dtype=bool)
         self.held_heading = np.full(n, np.nan)
+        self.intent_heading = np.full(n, np.nan)
         self.speed_target = np.full(n, np.nan)
         self.speed_limits = (
             np.zeros((n, 2)) if speed_limits is None else np.array(speed_limits, dtype=float)
@@ -134,12 +141,15 @@ class AvoidancePolicy:
         self._encounters = Encounters.empty()
 
     def __setstate__(self, state):
-        """Unpickle; a checkpoint from before ``held_heading``, ``resume_margin_floor`` and
-        speed advice holds no held heading (NaN), a floor of 0 and no speed advice."""
+        """Unpickle; a checkpoint from before ``held_heading``, ``resume_margin_floor``, speed
+        advice and ``intent_heading`` holds no held heading (NaN), a floor of 0, no speed
+        advice and no intent (NaN)."""
         n = np.asarray(state["advice"]).size
         if "held_heading" not in state:
             state["held_heading"] = np.full(n, np.nan)
         state.setdefault("resume_margin_floor", 0.0)
+        if "intent_heading" not in state:
+            state["intent_heading"] = np.full(n, np.nan)
         if "speed_target" not in state:
             state["speed_target"] = np.full(n, np.nan)
             state["speed_limits"] = np.zeros((n, 2))
@@ -190,6 +200,12 @@ class AvoidancePolicy:
                         out[cut] = np.where(frac[part] > 0.0, rate[cut] * frac[part], 0.0)
                         follow[cut] = True
         self.following = follow
+        if anyone:
+            heading = np.arctan2(velocities[:, 1], velocities[:, 0])
+            steer = np.where(follow & self.conflict, self.held_heading, heading)
+            self.intent_heading = np.where(flying, np.where(follow, steer, desired), np.nan)
+        else:
+            self.intent_heading = np.full(n, np.nan)
         # the advised speed is flown with the advice and the held heading, not the route
         self.speed_target[~follow] = np.nan
         if anyone:
@@ -336,10 +352,18 @@ class AvoidancePolicy:
             if res.uses_intruder_turn_rate:
                 omega = view.x[np.maximum(enc.rows, 0), 4]
                 given["intruder_turn_rate"] = np.where(enc.rows >= 0, np.nan_to_num(omega), 0.0)
+            ids = np.where(enc.rows >= 0, view.intruder[np.maximum(enc.rows, 0)], -1)
             if res.uses_aircraft_ids:
                 given["aircraft_ids"] = enc.owners
-                given["intruder_ids"] = np.where(
-                    enc.rows >= 0, view.intruder[np.maximum(enc.rows, 0)], -1
+                given["intruder_ids"] = ids
+            if res.uses_intruder_intent:
+                at = np.maximum(ids, 0)
+                vi = enc.rel_velocity + own_vo[:, None, :]
+                target = np.where(ids >= 0, self.intent_heading[at], np.nan)
+                change = wrap_angle(target - np.arctan2(vi[..., 1], vi[..., 0]))
+                given["intruder_intent"] = np.where(np.isfinite(change), change, 0.0)
+                given["intruder_turn_limit"] = np.where(
+                    ids >= 0, max_heading_change[at] / self.dt, 0.0
                 )
             if res.advises_speed:
                 given["speed_limits"] = self.speed_limits[enc.owners]

@@ -1,0 +1,186 @@
+"""Intent-based band search ("bands-flown-intent", avoidance/intent_bands.py): intruders
+predicted along the heading they broadcast they steer to, judged against a brute-force
+oracle, and the CDA policy's intents and what it hands the resolver."""
+
+import math
+
+import numpy as np
+import pytest
+
+from airspace_sim import registry
+from airspace_sim.avoidance.flown_bands import FlownBandsResolver
+from airspace_sim.avoidance.intent_bands import IntentFlownBandsResolver, intent_turns
+from airspace_sim.geometry import wrap_angle
+
+RATE = math.radians(3.0)
+RADIUS = 3300.0
+K1 = dict(
+    fresh_sides_only=True,
+    switch_below=1.0,
+    switch_blocked_at_once=True,
+    boxed_best_both=True,
+    boxed_margin=0.1,
+    boxed_horizon_s=20.0,
+    boxed_horizon_guard=0.7,
+)
+
+
+def _path(speed, heading, rate, turn_s, t):
+    """(x, y) (T,) of an arc at ``rate`` (signed) for ``turn_s`` s, then straight."""
+    tt = np.minimum(t, turn_s)
+    if rate != 0.0 and turn_s > 0.0:
+        h1 = heading + rate * tt
+        x = speed / rate * (np.sin(h1) - np.sin(heading))
+        y = speed / rate * (np.cos(heading) - np.cos(h1))
+    else:
+        h1 = np.full_like(t, heading)
+        x, y = speed * tt * np.cos(heading), speed * tt * np.sin(heading)
+    return x + (t - tt) * speed * np.cos(h1), y + (t - tt) * speed * np.sin(h1)
+
+
+def test_registered():
+    assert registry.get("resolver", "bands-flown-intent") is IntentFlownBandsResolver
+    assert IntentFlownBandsResolver.uses_intruder_intent
+    assert not FlownBandsResolver.uses_intruder_intent
+    # the conflict test stays the straight one: the world's prefilter holds
+    assert IntentFlownBandsResolver.prefilter
+
+
+def test_intent_turns():
+    intent = np.array([[0.3, -0.6, np.nan, 0.2, 0.0]])
+    limit = np.array([[RATE, RATE / 2, RATE, np.inf, RATE]])
+    omega, turn_s = intent_turns(intent, limit)
+    np.testing.assert_allclose(omega[0], [RATE, -RATE / 2, 0.0, 0.0, 0.0])
+    np.testing.assert_allclose(turn_s[0], [0.3 / RATE, 0.6 / (RATE / 2), 0.0, 0.0, 0.0])
+
+
+def _scene(seed, n=30, k=4):
+    rng = np.random.default_rng(seed)
+    vo = rng.normal(size=(n, 2))
+    vo *= rng.uniform(180, 260, (n, 1)) / np.linalg.norm(vo, axis=1, keepdims=True)
+    # intruders ahead-ish, converging, so most rows are in conflict
+    r = rng.uniform(-9000, 9000, (n, k, 2))
+    r = np.where(np.hypot(r[..., :1], r[..., 1:]) < 3500.0, r * 3.0, r)
+    vi = -r / np.linalg.norm(r, axis=-1, keepdims=True) * rng.uniform(180, 260, (n, k, 1))
+    vi += rng.normal(0, 60, (n, k, 2))
+    valid = rng.random((n, k)) < 0.9
+    intent = np.radians(rng.uniform(-60, 60, (n, k)))
+    intent[rng.random((n, k)) < 0.3] = 0.0
+    limit = np.full((n, k), RATE)
+    return vo, r, vi - vo[:, None], valid, np.full(n, math.radians(60.0)), intent, limit
+
+
+def _resolve(cls, scene, intents=True, side=-1.0, **params):
+    vo, r, v, valid, mx, intent, limit = scene
+    extra = dict(intruder_intent=intent, intruder_turn_limit=limit) if intents else {}
+    return cls(cls.Params(**params)).resolve(
+        vo,
+        r,
+        v,
+        valid,
+        mx,
+        turn_rate=np.full(vo.shape[0], RATE),
+        committed_side=np.full(vo.shape[0], side),
+        **extra,
+    )
+
+
+def test_without_intents_it_is_bands_flown():
+    scene = _scene(0)
+    out = _resolve(IntentFlownBandsResolver, scene, intents=False, **K1)
+    ref = _resolve(FlownBandsResolver, scene, intents=False, **K1)
+    for field in ("heading_change", "conflict", "first_clear", "best_blocked", "min_ratio"):
+        np.testing.assert_array_equal(getattr(out, field), getattr(ref, field))
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_candidates_are_judged_against_the_intents_by_a_sampled_oracle(seed):
+    """On rows in conflict (the straight test, as bands-flown's), every candidate's ratio is
+    the minimum distance with the ownship flying it as flown and each intruder turning to
+    its intent at its limit, then straight, both paths sampled every 10 ms."""
+    scene = _scene(seed)
+    vo, r, v, valid, mx, intent, limit = scene
+    out = _resolve(IntentFlownBandsResolver, scene, **K1)
+    ref = _resolve(FlownBandsResolver, scene, intents=False, **K1)
+    np.testing.assert_array_equal(out.conflict, ref.conflict)
+    rows = np.flatnonzero(out.conflict)
+    assert rows.size >= 10
+    t = np.linspace(0.0, 120.0, 12001)
+    omega, turn_s = intent_turns(intent, limit)
+    for i in rows[:8]:
+        speed, h0 = np.hypot(*vo[i]), math.atan2(vo[i, 1], vo[i, 0])
+        cand = out.candidates[i]
+        for c in np.flatnonzero(~np.isnan(cand))[::9]:
+            psi = cand[c]
+            ox, oy = _path(speed, h0, math.copysign(RATE, psi), abs(psi) / RATE, t)
+            best = np.inf
+            for q in np.flatnonzero(valid[i]):
+                vi = v[i, q] + vo[i]
+                h = math.atan2(vi[1], vi[0])
+                ix, iy = _path(np.hypot(*vi), h, omega[i, q], turn_s[i, q], t)
+                best = min(best, np.hypot(r[i, q, 0] + ix - ox, r[i, q, 1] + iy - oy).min())
+            assert out.min_ratio[i, c] == pytest.approx(best / RADIUS, abs=4.0 / RADIUS)
+
+
+def test_an_intruder_turning_away_frees_the_ownship():
+    """Head-on at 16 km closing at 460 m/s, the intruder steering 60° to its right: judged
+    straight, flying on is blocked and the ownship turns; with the intent, flying on is clear
+    and it keeps its heading (still reporting the straight conflict)."""
+    vo = np.array([[230.0, 0.0]])
+    r = np.array([[[16000.0, 300.0]]])
+    v = np.array([[[-460.0, 0.0]]])
+    # the intruder flies west (heading π); 60° to its right is toward +y... right of west is north
+    scene = (vo, r, v, np.ones((1, 1), bool), np.array([math.pi / 2]))
+    intent = np.array([[-math.radians(60.0)]])
+    limit = np.array([[RATE]])
+    out = _resolve(IntentFlownBandsResolver, (*scene, intent, limit), **K1)
+    ref = _resolve(FlownBandsResolver, (*scene, intent, limit), intents=False, **K1)
+    assert out.conflict[0] and ref.conflict[0]
+    assert ref.heading_change[0] != 0.0
+    assert out.heading_change[0] == 0.0
+
+
+def test_policy_broadcasts_intents_and_hands_them_over():
+    """The CDA policy's intent is the held advised heading of an aircraft following the
+    advice in conflict, NaN for aircraft that do not fly the policy; the resolver gets, per
+    slot, that intent minus the track's heading (0 where there is none)."""
+    from airspace_sim.scenarios import load
+    from airspace_sim.world import World
+
+    sc = load(
+        "ring",
+        ["traffic.count=8", "traffic.radius=9000.0", 'resolver.kind="bands-flown-intent"'],
+    )
+    world = World(sc, seed=0)
+    policy = world.policy
+    assert isinstance(policy.resolver, IntentFlownBandsResolver)
+    resolve, seen = policy.resolver.resolve, []
+    # every gathered ownship reaches the resolver, so the policy's encounters are its rows
+    policy.resolver.prefilter = False
+
+    def spy(*args, **kw):
+        enc, view = policy._encounters, world.tracks.view()
+        ids = np.where(enc.rows >= 0, view.intruder[np.maximum(enc.rows, 0)], -1)
+        seen.append((args, kw, policy.intent_heading.copy(), ids))
+        return resolve(*args, **kw)
+
+    policy.resolver.resolve = spy
+    followed = handed = 0
+    for _ in range(60):
+        held, conflict = policy.held_heading.copy(), policy.conflict.copy()
+        seen.clear()
+        world.step()
+        mask = policy.following & conflict
+        np.testing.assert_array_equal(policy.intent_heading[mask], held[mask])
+        followed += int(mask.sum())
+        for args, kw, intent_heading, ids in seen:
+            vo, rel_v = args[0], args[2]
+            vi = rel_v + vo[:, None, :]
+            track_heading = np.arctan2(vi[..., 1], vi[..., 0])
+            target = np.where(ids >= 0, intent_heading[np.maximum(ids, 0)], np.nan)
+            want = np.where(np.isfinite(target), wrap_angle(target - track_heading), 0.0)
+            np.testing.assert_allclose(kw["intruder_intent"], want, atol=1e-12)
+            np.testing.assert_allclose(kw["intruder_turn_limit"][ids >= 0], RATE, rtol=1e-12)
+            handed += int((np.abs(want) > 1e-3).sum())
+    assert followed > 20 and handed > 10
+    assert world.metrics()["los_pairs"] == 0
