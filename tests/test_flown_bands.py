@@ -640,3 +640,33 @@ def test_policy_unpickles_a_checkpoint_from_before_the_held_heading():
     policy = AvoidancePolicy.__new__(AvoidancePolicy)
     policy.__setstate__(state)
     assert policy.held_heading.shape == (world.n,) and np.isnan(policy.held_heading).all()
+
+
+class _SlotRadius(FlownBandsResolver):
+    """A clear radius per slot through the ``clear_radius`` hook: ``scale`` times the padded
+    radius on every slot."""
+
+    scale = 1.0
+
+    def clear_radius(self, vo, r, v, valid):
+        p = self.params
+        return np.full(valid.shape, self.scale * p.r_safe * (1.0 + p.margin))
+
+
+@pytest.mark.parametrize("scale", [1.0, 1.5])
+def test_a_clear_radius_per_slot_is_the_scalar_radius_it_equals(scale):
+    """An (N, K) clear radius from the hook gives the output of the scalar radius of the same
+    value (r_safe scaled), on every path of the search (as flown, boxed fallbacks)."""
+    vo, r, v, valid, mx = _random_scene(5, n=200, k=6)
+    n = vo.shape[0]
+    kept = _committed_sides(n)
+    knobs = dict(AO, boxed_best_both=True, boxed_horizon_s=20.0)
+    hooked = _SlotRadius(FlownBandsResolver.Params(**knobs))
+    hooked.scale = scale
+    plain = FlownBandsResolver(FlownBandsResolver.Params(r_safe=3000.0 * scale, **knobs))
+    rate = np.full(n, RATE)
+    a = hooked.resolve(vo, r, v, valid, mx, turn_rate=rate, committed_side=kept)
+    b = plain.resolve(vo, r, v, valid, mx, turn_rate=rate, committed_side=kept)
+    for field in ("heading_change", "conflict", "first_clear", "best_blocked"):
+        np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
+    np.testing.assert_allclose(a.min_ratio, b.min_ratio, rtol=1e-12)
