@@ -184,3 +184,37 @@ def test_policy_broadcasts_intents_and_hands_them_over():
             handed += int((np.abs(want) > 1e-3).sum())
     assert followed > 20 and handed > 10
     assert world.metrics()["los_pairs"] == 0
+
+
+def test_intent_share_scales_the_intended_turns():
+    """``intent_share = s`` is the full trust of intents scaled by ``s``."""
+    vo, r, v, valid, mx, intent, limit = _scene(3)
+    scene = (vo, r, v, valid, mx, intent, limit)
+    shared = _resolve(IntentFlownBandsResolver, scene, intent_share=0.4, **K1)
+    scaled = _resolve(IntentFlownBandsResolver, (vo, r, v, valid, mx, 0.4 * intent, limit), **K1)
+    full = _resolve(IntentFlownBandsResolver, scene, **K1)
+    finite = np.isfinite(shared.min_ratio)
+    # the share matters on this scene
+    assert np.abs(shared.min_ratio[finite] - full.min_ratio[finite]).max() > 1e-3
+    for field in ("heading_change", "first_clear", "best_blocked", "min_ratio"):
+        np.testing.assert_array_equal(getattr(shared, field), getattr(scaled, field))
+
+
+def test_priority_uses_only_the_intents_of_lower_indices():
+    """Prioritized planning: the intents of intruders of a higher aircraft index than the
+    ownship's are ignored (predicted straight), those of lower ones trusted."""
+    vo, r, v, valid, mx, intent, limit = _scene(4)
+    n, k = valid.shape
+    rng = np.random.default_rng(9)
+    own = rng.permutation(n) + 5
+    ids = rng.integers(0, n + 10, (n, k))
+    ids[~valid] = -1
+    resolver = IntentFlownBandsResolver(IntentFlownBandsResolver.Params(priority=True, **K1))
+    kw = dict(turn_rate=np.full(n, RATE), committed_side=np.full(n, -1.0))
+    out = resolver.resolve(vo, r, v, valid, mx, intruder_intent=intent, intruder_turn_limit=limit,
+                           aircraft_ids=own, intruder_ids=ids, **kw)  # fmt: skip
+    kept = np.where((ids >= 0) & (ids < own[:, None]), intent, 0.0)
+    assert 0 < np.count_nonzero(kept) < np.count_nonzero(intent)
+    ref = _resolve(IntentFlownBandsResolver, (vo, r, v, valid, mx, kept, limit), **K1)
+    for field in ("heading_change", "first_clear", "best_blocked", "min_ratio"):
+        np.testing.assert_array_equal(getattr(out, field), getattr(ref, field))

@@ -440,6 +440,8 @@ class FlownBandsResolver(BandsResolver):
                 "turn_rate": intruder_turn_rate,
                 "intent": intruder_intent,
                 "turn_limit": intruder_turn_limit,
+                "aircraft_ids": aircraft_ids,
+                "intruder_ids": intruder_ids,
             },
         )
         if turning is not None and turning.detects:
@@ -566,7 +568,8 @@ class FlownBandsResolver(BandsResolver):
         and :class:`~airspace_sim.avoidance.intent_bands.IntentFlownBandsResolver` return an
         :class:`IntruderTurns`). ``intruders``: the keyword arguments ``intruder_turn_rate``,
         ``intruder_intent`` and ``intruder_turn_limit`` of :meth:`resolve` by their last
-        word."""
+        words (``turn_rate``, ``intent``, ``turn_limit``), and ``aircraft_ids`` and
+        ``intruder_ids``."""
         return None
 
 

@@ -28,6 +28,8 @@ Distances m, times s, angles rad CCW positive.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from airspace_sim import registry
@@ -36,6 +38,7 @@ from airspace_sim.avoidance.flown_bands import (
     FlownBandsResolver,
     IntruderTurns,
 )
+from airspace_sim.parts import param
 
 
 def intent_turns(intent, turn_limit):
@@ -57,7 +60,28 @@ class IntentFlownBandsResolver(FlownBandsResolver):
     """``"bands-flown"`` with each equipped intruder predicted along its intent (module
     docstring)."""
 
+    @dataclass(frozen=True)
+    class Params(FlownBandsResolver.Params):
+        trust_intent: bool = param(
+            True,
+            doc="judge candidates against each intruder's intended path alone (false: "
+            "against the smaller of its straight and intended paths' ratios)",
+        )
+        intent_share: float = param(
+            1.0,
+            doc="the fraction of each intruder's intended heading change it is predicted to "
+            "make (1: all of it; 0: straight)",
+            ge=0.0,
+            le=1.0,
+        )
+        priority: bool = param(
+            False,
+            doc="prioritized planning: use only the intents of intruders of a lower aircraft "
+            "index than the ownship's, and predict the others straight",
+        )
+
     uses_intruder_intent = True
+    uses_aircraft_ids = True
 
     def intruder_turns(self, n, k, turn_rate, intruders):
         """Each intruder turning to its intent at its turn limit, candidates judged against
@@ -67,5 +91,13 @@ class IntentFlownBandsResolver(FlownBandsResolver):
             return None
         rate = DEFAULT_TURN_RATE if turn_rate is None else turn_rate
         rate = np.broadcast_to(np.asarray(rate, dtype=float), (n,))
-        omega, turn_s = intent_turns(intent, intruders["turn_limit"])
-        return IntruderTurns(rate, omega, turn_s, detects=False, replaces=True)
+        if self.params.priority:
+            own, ids = intruders["aircraft_ids"], intruders["intruder_ids"]
+            if own is None:
+                return None
+            ahead = (ids >= 0) & (ids < np.asarray(own)[:, None])
+            intent = np.where(ahead, intent, 0.0)
+        omega, turn_s = intent_turns(
+            self.params.intent_share * np.asarray(intent), intruders["turn_limit"]
+        )
+        return IntruderTurns(rate, omega, turn_s, detects=False, replaces=self.params.trust_intent)
