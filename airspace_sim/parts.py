@@ -298,7 +298,8 @@ class Resolver(ABC):
     uses_aircraft_ids: ClassVar[bool] = False
     #: :meth:`resolve` takes ``intruder_intent`` (N, K) rad, the heading change from each
     #: intruder track's heading to the heading that aircraft broadcasts it steers to (0: none
-    #: or straight), and ``intruder_turn_limit`` (N, K) rad/s, its turn-rate limit
+    #: or straight), ``intruder_turn_limit`` (N, K) rad/s, its turn-rate limit, and
+    #: ``intruder_intent_age_s`` (N, K) s, how long that intent has held
     uses_intruder_intent: ClassVar[bool] = False
 
     params: object
@@ -361,7 +362,10 @@ FLAG_KEYWORDS = {
         "uses_intruder_turn_rate": ("resolve", ("intruder_turn_rate",)),
         "advises_speed": ("resolve", ("speed_limits", "max_acceleration")),
         "uses_aircraft_ids": ("resolve", ("aircraft_ids", "intruder_ids")),
-        "uses_intruder_intent": ("resolve", ("intruder_intent", "intruder_turn_limit")),
+        "uses_intruder_intent": (
+            "resolve",
+            ("intruder_intent", "intruder_turn_limit", "intruder_intent_age_s"),
+        ),
     }
 }
 

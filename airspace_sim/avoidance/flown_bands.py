@@ -421,6 +421,7 @@ class FlownBandsResolver(BandsResolver):
         intruder_ids=None,
         intruder_intent=None,
         intruder_turn_limit=None,
+        intruder_intent_age_s=None,
     ):
         p = self.params
         vo, r, v, valid, mx = _arrays(
@@ -440,8 +441,10 @@ class FlownBandsResolver(BandsResolver):
                 "turn_rate": intruder_turn_rate,
                 "intent": intruder_intent,
                 "turn_limit": intruder_turn_limit,
+                "intent_age_s": intruder_intent_age_s,
                 "aircraft_ids": aircraft_ids,
                 "intruder_ids": intruder_ids,
+                "geometry": (vo, r, v, valid, radius),
             },
         )
         if turning is not None and turning.detects:
@@ -568,8 +571,8 @@ class FlownBandsResolver(BandsResolver):
         and :class:`~airspace_sim.avoidance.intent_bands.IntentFlownBandsResolver` return an
         :class:`IntruderTurns`). ``intruders``: the keyword arguments ``intruder_turn_rate``,
         ``intruder_intent`` and ``intruder_turn_limit`` of :meth:`resolve` by their last
-        words (``turn_rate``, ``intent``, ``turn_limit``), and ``aircraft_ids`` and
-        ``intruder_ids``."""
+        words (``turn_rate``, ``intent``, ``turn_limit``, ``intent_age_s``), ``aircraft_ids`` and
+        ``intruder_ids``, and ``geometry``: ``(vo, r, v, valid, radius)`` as judged."""
         return None
 
 

@@ -33,6 +33,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from airspace_sim import registry
+from airspace_sim.avoidance.bands import CLEAR_TOLERANCE
+from airspace_sim.avoidance.cpa import cpa_pair_ratios
 from airspace_sim.avoidance.flown_bands import (
     DEFAULT_TURN_RATE,
     FlownBandsResolver,
@@ -74,6 +76,18 @@ class IntentFlownBandsResolver(FlownBandsResolver):
             ge=0.0,
             le=1.0,
         )
+        intent_max_conflicts: int = param(
+            0,
+            doc="use intents only on ownships with at most this many intruders in conflict "
+            "(straight test at the current heading); more: all predicted straight (0: always)",
+            ge=0,
+        )
+        intent_min_age_s: float = param(
+            0.0,
+            unit="s",
+            doc="use an intruder's intent only once it has held this long (0: always)",
+            ge=0.0,
+        )
         priority: bool = param(
             False,
             doc="prioritized planning: use only the intents of intruders of a lower aircraft "
@@ -97,6 +111,17 @@ class IntentFlownBandsResolver(FlownBandsResolver):
                 return None
             ahead = (ids >= 0) & (ids < np.asarray(own)[:, None])
             intent = np.where(ahead, intent, 0.0)
+        if self.params.intent_min_age_s > 0.0:
+            age = intruders["intent_age_s"]
+            held = age is not None and np.asarray(age) >= self.params.intent_min_age_s
+            intent = np.where(held, intent, 0.0)
+        if self.params.intent_max_conflicts > 0:
+            vo, r, v, valid, radius = intruders["geometry"]
+            alone = cpa_pair_ratios(
+                vo, r, v, valid, np.zeros((n, 1)), radius, self.params.lookahead_s
+            )[:, :, 0]
+            count = (alone < 1.0 - CLEAR_TOLERANCE).sum(axis=1)
+            intent = np.where((count <= self.params.intent_max_conflicts)[:, None], intent, 0.0)
         omega, turn_s = intent_turns(
             self.params.intent_share * np.asarray(intent), intruders["turn_limit"]
         )

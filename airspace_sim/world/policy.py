@@ -50,6 +50,10 @@ RESUME_FRACTIONS = np.array([1.0, 0.5, 0.25, 0.0])
 DIVERGING_TOLERANCE = 1e-9
 
 
+#: rad: an aircraft's intent heading that moves by no more than this has held (1°)
+INTENT_TOLERANCE = math.radians(1.0)
+
+
 class AvoidancePolicy:
     """CDA for all N aircraft of a world (see the module docstring).
 
@@ -78,6 +82,8 @@ class AvoidancePolicy:
         heading otherwise), NaN for aircraft that do not fly the policy or have no desired
         heading: the intent an equipped aircraft broadcasts, given (as each intruder slot's
         heading change from its track's heading) to resolvers with ``uses_intruder_intent``.
+    intent_age_s : (N,) s, how long each aircraft's intent has held within
+        :data:`INTENT_TOLERANCE` (0 when it changes, appears or goes).
     speed_target : (N,) m/s, the ground speed a resolver with ``advises_speed`` advised with
         the heading; set at each detection in conflict, kept while the aircraft flies the
         policy (advice or a held heading), NaN (its own speed) once it flies its autopilot
@@ -130,6 +136,7 @@ class AvoidancePolicy:
         self.following = np.zeros(n, dtype=bool)
         self.held_heading = np.full(n, np.nan)
         self.intent_heading = np.full(n, np.nan)
+        self.intent_age_s = np.zeros(n)
         self.speed_target = np.full(n, np.nan)
         self.speed_limits = (
             np.zeros((n, 2)) if speed_limits is None else np.array(speed_limits, dtype=float)
@@ -150,6 +157,7 @@ class AvoidancePolicy:
         state.setdefault("resume_margin_floor", 0.0)
         if "intent_heading" not in state:
             state["intent_heading"] = np.full(n, np.nan)
+            state["intent_age_s"] = np.zeros(n)
         if "speed_target" not in state:
             state["speed_target"] = np.full(n, np.nan)
             state["speed_limits"] = np.zeros((n, 2))
@@ -203,9 +211,12 @@ class AvoidancePolicy:
         if anyone:
             heading = np.arctan2(velocities[:, 1], velocities[:, 0])
             steer = np.where(follow & self.conflict, self.held_heading, heading)
-            self.intent_heading = np.where(flying, np.where(follow, steer, desired), np.nan)
+            intent = np.where(flying, np.where(follow, steer, desired), np.nan)
         else:
-            self.intent_heading = np.full(n, np.nan)
+            intent = np.full(n, np.nan)
+        same = np.abs(wrap_angle(intent - self.intent_heading)) <= INTENT_TOLERANCE
+        self.intent_age_s = np.where(same, self.intent_age_s + self.dt, 0.0)
+        self.intent_heading = intent
         # the advised speed is flown with the advice and the held heading, not the route
         self.speed_target[~follow] = np.nan
         if anyone:
@@ -365,6 +376,7 @@ class AvoidancePolicy:
                 given["intruder_turn_limit"] = np.where(
                     ids >= 0, max_heading_change[at] / self.dt, 0.0
                 )
+                given["intruder_intent_age_s"] = np.where(ids >= 0, self.intent_age_s[at], 0.0)
             if res.advises_speed:
                 given["speed_limits"] = self.speed_limits[enc.owners]
                 given["max_acceleration"] = self.max_acceleration[enc.owners]
