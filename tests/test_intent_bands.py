@@ -218,3 +218,46 @@ def test_priority_uses_only_the_intents_of_lower_indices():
     ref = _resolve(IntentFlownBandsResolver, (vo, r, v, valid, mx, kept, limit), **K1)
     for field in ("heading_change", "first_clear", "best_blocked", "min_ratio"):
         np.testing.assert_array_equal(getattr(out, field), getattr(ref, field))
+
+
+def test_intent_min_age_and_max_conflicts_mask_intents():
+    """``intent_min_age_s`` uses only intents held that long; ``intent_max_conflicts`` only
+    on ownships with that many intruders in conflict at most (the straight test): both are
+    the full trust of the intents so masked."""
+    from airspace_sim.avoidance.cpa import cpa_pair_ratios
+
+    vo, r, v, valid, mx, intent, limit = _scene(6)
+    n = vo.shape[0]
+    age = np.random.default_rng(2).uniform(0.0, 20.0, valid.shape)
+    resolver = IntentFlownBandsResolver(
+        IntentFlownBandsResolver.Params(intent_min_age_s=8.0, intent_max_conflicts=1, **K1)
+    )
+    kw = dict(turn_rate=np.full(n, RATE), committed_side=np.full(n, -1.0))
+    out = resolver.resolve(vo, r, v, valid, mx, intruder_intent=intent, intruder_turn_limit=limit,
+                           intruder_intent_age_s=age, **kw)  # fmt: skip
+    alone = cpa_pair_ratios(vo, r, v, valid, np.zeros((n, 1)), RADIUS, 120.0)[:, :, 0]
+    few = ((alone < 1.0 - 1e-9).sum(axis=1) <= 1)[:, None]
+    kept = np.where((age >= 8.0) & few, intent, 0.0)
+    assert 0 < np.count_nonzero(kept) < np.count_nonzero(intent)
+    ref = _resolve(IntentFlownBandsResolver, (vo, r, v, valid, mx, kept, limit), **K1)
+    for field in ("heading_change", "first_clear", "best_blocked", "min_ratio"):
+        np.testing.assert_array_equal(getattr(out, field), getattr(ref, field))
+
+
+def test_policy_intent_age_counts_seconds_the_intent_held():
+    from airspace_sim.scenarios import load
+    from airspace_sim.world import World
+
+    sc = load("ring", ["traffic.count=8", "traffic.radius=9000.0"])
+    world = World(sc, seed=0)
+    policy = world.policy
+    grew = reset = 0
+    for _ in range(60):
+        before, age = policy.intent_heading.copy(), policy.intent_age_s.copy()
+        world.step()
+        same = np.abs(wrap_angle(policy.intent_heading - before)) <= math.radians(1.0)
+        np.testing.assert_array_equal(policy.intent_age_s[same], age[same] + world.dt)
+        np.testing.assert_array_equal(policy.intent_age_s[~same], 0.0)
+        grew += int(same.sum())
+        reset += int((~same & np.isfinite(policy.intent_heading)).sum())
+    assert grew > 50 and reset > 5
