@@ -299,7 +299,8 @@ class Resolver(ABC):
     #: :meth:`resolve` takes ``intruder_intent`` (N, K) rad, the heading change from each
     #: intruder track's heading to the heading that aircraft broadcasts it steers to (0: none
     #: or straight), ``intruder_turn_limit`` (N, K) rad/s, its turn-rate limit, and
-    #: ``intruder_intent_age_s`` (N, K) s, how long that intent has held
+    #: ``intruder_intent_age_s`` (N, K) s, how long that intent has held, and
+    #: ``own_intent_age_s`` (N,) s, how long the ownship's own has
     uses_intruder_intent: ClassVar[bool] = False
 
     params: object
@@ -364,7 +365,7 @@ FLAG_KEYWORDS = {
         "uses_aircraft_ids": ("resolve", ("aircraft_ids", "intruder_ids")),
         "uses_intruder_intent": (
             "resolve",
-            ("intruder_intent", "intruder_turn_limit", "intruder_intent_age_s"),
+            ("intruder_intent", "intruder_turn_limit", "intruder_intent_age_s", "own_intent_age_s"),
         ),
     }
 }

@@ -161,7 +161,8 @@ def test_policy_broadcasts_intents_and_hands_them_over():
     def spy(*args, **kw):
         enc, view = policy._encounters, world.tracks.view()
         ids = np.where(enc.rows >= 0, view.intruder[np.maximum(enc.rows, 0)], -1)
-        seen.append((args, kw, policy.intent_heading.copy(), ids))
+        seen.append((args, kw, policy.intent_heading.copy(), ids, policy.intent_age_s.copy()))
+        np.testing.assert_array_equal(kw["own_intent_age_s"], policy.intent_age_s[enc.owners])
         return resolve(*args, **kw)
 
     policy.resolver.resolve = spy
@@ -173,7 +174,10 @@ def test_policy_broadcasts_intents_and_hands_them_over():
         mask = policy.following & conflict
         np.testing.assert_array_equal(policy.intent_heading[mask], held[mask])
         followed += int(mask.sum())
-        for args, kw, intent_heading, ids in seen:
+        for args, kw, intent_heading, ids, age in seen:
+            np.testing.assert_array_equal(
+                kw["intruder_intent_age_s"], np.where(ids >= 0, age[np.maximum(ids, 0)], 0.0)
+            )
             vo, rel_v = args[0], args[2]
             vi = rel_v + vo[:, None, :]
             track_heading = np.arctan2(vi[..., 1], vi[..., 0])
@@ -261,3 +265,28 @@ def test_policy_intent_age_counts_seconds_the_intent_held():
         grew += int(same.sum())
         reset += int((~same & np.isfinite(policy.intent_heading)).sum())
     assert grew > 50 and reset > 5
+
+
+def test_priority_by_age_uses_only_intents_older_than_the_ownships():
+    """Prioritized planning by who committed first: an intruder's intent is used when it has
+    held longer than the ownship's own, or as long and the intruder's index is lower."""
+    vo, r, v, valid, mx, intent, limit = _scene(7)
+    n, k = valid.shape
+    rng = np.random.default_rng(4)
+    own = np.arange(n) + 3
+    ids = rng.integers(0, n + 6, (n, k))
+    ids[~valid] = -1
+    age = rng.integers(0, 4, (n, k)).astype(float)  # ties are common
+    mine = rng.integers(0, 4, n).astype(float)
+    resolver = IntentFlownBandsResolver(IntentFlownBandsResolver.Params(priority_by_age=True, **K1))
+    out = resolver.resolve(
+        vo, r, v, valid, mx, turn_rate=np.full(n, RATE), committed_side=np.full(n, -1.0),
+        intruder_intent=intent, intruder_turn_limit=limit, intruder_intent_age_s=age,
+        own_intent_age_s=mine, aircraft_ids=own, intruder_ids=ids,
+    )  # fmt: skip
+    first = (age > mine[:, None]) | ((age == mine[:, None]) & (ids < own[:, None]))
+    kept = np.where((ids >= 0) & first, intent, 0.0)
+    assert 0 < np.count_nonzero(kept) < np.count_nonzero(intent)
+    ref = _resolve(IntentFlownBandsResolver, (vo, r, v, valid, mx, kept, limit), **K1)
+    for field in ("heading_change", "first_clear", "best_blocked", "min_ratio"):
+        np.testing.assert_array_equal(getattr(out, field), getattr(ref, field))

@@ -422,6 +422,7 @@ class FlownBandsResolver(BandsResolver):
         intruder_intent=None,
         intruder_turn_limit=None,
         intruder_intent_age_s=None,
+        own_intent_age_s=None,
     ):
         p = self.params
         vo, r, v, valid, mx = _arrays(
@@ -442,6 +443,7 @@ class FlownBandsResolver(BandsResolver):
                 "intent": intruder_intent,
                 "turn_limit": intruder_turn_limit,
                 "intent_age_s": intruder_intent_age_s,
+                "own_intent_age_s": own_intent_age_s,
                 "aircraft_ids": aircraft_ids,
                 "intruder_ids": intruder_ids,
                 "geometry": (vo, r, v, valid, radius),
@@ -571,7 +573,8 @@ class FlownBandsResolver(BandsResolver):
         and :class:`~airspace_sim.avoidance.intent_bands.IntentFlownBandsResolver` return an
         :class:`IntruderTurns`). ``intruders``: the keyword arguments ``intruder_turn_rate``,
         ``intruder_intent`` and ``intruder_turn_limit`` of :meth:`resolve` by their last
-        words (``turn_rate``, ``intent``, ``turn_limit``, ``intent_age_s``), ``aircraft_ids`` and
+        words (``turn_rate``, ``intent``, ``turn_limit``, ``intent_age_s``), ``own_intent_age_s``,
+        ``aircraft_ids`` and
         ``intruder_ids``, and ``geometry``: ``(vo, r, v, valid, radius)`` as judged."""
         return None
 

@@ -93,6 +93,11 @@ class IntentFlownBandsResolver(FlownBandsResolver):
             doc="prioritized planning: use only the intents of intruders of a lower aircraft "
             "index than the ownship's, and predict the others straight",
         )
+        priority_by_age: bool = param(
+            False,
+            doc="prioritized planning by who committed first: use only the intents held "
+            "longer than the ownship's own (equal ages: the lower aircraft index first)",
+        )
 
     uses_intruder_intent = True
     uses_aircraft_ids = True
@@ -111,6 +116,14 @@ class IntentFlownBandsResolver(FlownBandsResolver):
                 return None
             ahead = (ids >= 0) & (ids < np.asarray(own)[:, None])
             intent = np.where(ahead, intent, 0.0)
+        if self.params.priority_by_age:
+            own, ids = intruders["aircraft_ids"], intruders["intruder_ids"]
+            age, mine = intruders["intent_age_s"], intruders["own_intent_age_s"]
+            if own is None or age is None or mine is None:
+                return None
+            mine = np.asarray(mine, dtype=float)[:, None]
+            older = (age > mine) | ((age == mine) & (ids < np.asarray(own)[:, None]))
+            intent = np.where((ids >= 0) & older, intent, 0.0)
         if self.params.intent_min_age_s > 0.0:
             age = intruders["intent_age_s"]
             held = age is not None and np.asarray(age) >= self.params.intent_min_age_s

@@ -377,6 +377,7 @@ class AvoidancePolicy:
                     ids >= 0, max_heading_change[at] / self.dt, 0.0
                 )
                 given["intruder_intent_age_s"] = np.where(ids >= 0, self.intent_age_s[at], 0.0)
+                given["own_intent_age_s"] = self.intent_age_s[enc.owners]
             if res.advises_speed:
                 given["speed_limits"] = self.speed_limits[enc.owners]
                 given["max_acceleration"] = self.max_acceleration[enc.owners]
