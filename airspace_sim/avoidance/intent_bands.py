@@ -9,7 +9,7 @@ each judged the other straight while both manoeuvred. Predicting the intruder's 
 turn (``"bands-flown-turns"``, the track's Ω) did not help: the estimate lags the turn and
 says nothing of where it ends.
 
-Here every aircraft that runs the CDA policy broadcasts the heading it is steering to, as
+Here every aircraft that flies the CDA policy broadcasts the heading it is steering to, as
 ADS-B's target state report (DO-260B) or an ACAS coordination message would carry it: the
 heading its resolver advised while it is in conflict, its autopilot's desired heading while
 it flies its route (a turn back included), its current heading while it holds
@@ -23,6 +23,17 @@ stays the straight one (the world's prefilter holds, and an ownship is not relea
 intent that may change at the next step); the sides open at once and the boxed fallbacks'
 short horizon stay straight too. Everything else is ``"bands-flown"``'s. The intents are one
 step old (what the intruder steered to when the world last moved), as a broadcast would be.
+
+Trusting every intent lets each aircraft leave part of a resolution to the others, and when
+all do it at once nobody turns enough: on the converging rings of 64 and 100 aircraft the
+ring jams (``docs/resolvers.md``, twelfth part). Which intents are used is therefore a
+choice: all of them (default), a share of each intended turn (``intent_share``), only those
+held for a while (``intent_min_age_s``), only on ownships with few conflicts
+(``intent_max_conflicts``), or a priority order in which the ownship uses only the intents of
+the aircraft that plan before it and predicts the others straight, as prioritized planning
+does (Erdmann & Lozano-Pérez 1987): by aircraft index (``priority``) or by who committed to
+its intent first (``priority_by_age``, ties by index). ``trust_intent = false`` judges each
+candidate against the worse of the straight and the intended path instead.
 Distances m, times s, angles rad CCW positive.
 """
 
