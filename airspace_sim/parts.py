@@ -298,9 +298,9 @@ class Resolver(ABC):
     uses_aircraft_ids: ClassVar[bool] = False
     #: :meth:`resolve` takes ``intruder_intent`` (N, K) rad, the heading change from each
     #: intruder track's heading to the heading that aircraft broadcasts it steers to (0: none
-    #: or straight), ``intruder_turn_limit`` (N, K) rad/s, its turn-rate limit, and
+    #: or straight), ``intruder_turn_limit`` (N, K) rad/s, its turn-rate limit,
     #: ``intruder_intent_age_s`` (N, K) s, how long that intent has held, and
-    #: ``own_intent_age_s`` (N,) s, how long the ownship's own has
+    #: ``own_intent_age_s`` (N,) s, how long the ownship's own intent has held
     uses_intruder_intent: ClassVar[bool] = False
 
     params: object

@@ -129,7 +129,8 @@ def test_an_intruder_turning_away_frees_the_ownship():
     vo = np.array([[230.0, 0.0]])
     r = np.array([[[16000.0, 300.0]]])
     v = np.array([[[-460.0, 0.0]]])
-    # the intruder flies west (heading π); 60° to its right is toward +y... right of west is north
+    # the intruder flies west, 300 m north of the ownship's track; 60° to its right is
+    # north-west, away from the ownship
     scene = (vo, r, v, np.ones((1, 1), bool), np.array([math.pi / 2]))
     intent = np.array([[-math.radians(60.0)]])
     limit = np.array([[RATE]])

@@ -315,8 +315,7 @@ def as_flown_on_rows(
     """``base`` (N, C) with the ``rows`` (N,) bool replaced by the as-flown minimum CPA ratio
     over ``lookahead_s`` of the candidates ``safe`` (N, C) rad (−inf where not ``usable``
     (N, C)); a new array. Arrays as in :func:`cpa_min_ratio_turning` (``radius`` m, a number
-    or (N, K)); ``turn_rate`` rad/s,
-    scalar or (N,), None: :data:`DEFAULT_TURN_RATE`."""
+    or (N, K)); ``turn_rate`` rad/s, scalar or (N,), None: :data:`DEFAULT_TURN_RATE`."""
     out = np.array(base, dtype=float, copy=True)
     idx = np.flatnonzero(rows)
     if idx.size and rel_position.shape[1] > 0:
@@ -571,11 +570,10 @@ class FlownBandsResolver(BandsResolver):
     def intruder_turns(self, n, k, turn_rate, intruders):
         """None: this resolver predicts intruders straight (:class:`TurnAwareFlownBandsResolver`
         and :class:`~airspace_sim.avoidance.intent_bands.IntentFlownBandsResolver` return an
-        :class:`IntruderTurns`). ``intruders``: the keyword arguments ``intruder_turn_rate``,
-        ``intruder_intent`` and ``intruder_turn_limit`` of :meth:`resolve` by their last
-        words (``turn_rate``, ``intent``, ``turn_limit``, ``intent_age_s``), ``own_intent_age_s``,
-        ``aircraft_ids`` and
-        ``intruder_ids``, and ``geometry``: ``(vo, r, v, valid, radius)`` as judged."""
+        :class:`IntruderTurns`). ``intruders``: :meth:`resolve`'s keyword arguments about
+        intruders by name, ``intruder_`` dropped (``turn_rate``, ``intent``, ``turn_limit``,
+        ``intent_age_s``; ``own_intent_age_s``, ``aircraft_ids`` and ``intruder_ids`` as
+        they are), and ``geometry``: ``(vo, r, v, valid, radius)`` as judged."""
         return None
 
 

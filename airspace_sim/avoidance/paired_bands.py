@@ -33,7 +33,10 @@ Rows are paired greedily, most urgent first (smallest straight CPA ratio of the 
 ψ = 0, from the lower row's track), each row at most once. The picks are reported as each
 row's best blocked candidate on its committed side, which the CDA policy flies while it stays
 boxed (the side label kept, as with ``boxed_best_both``). Everything else is
-``"bands-flown"``'s. Distances m, times s, angles rad CCW positive.
+``"bands-flown"``'s. Measured on ``dense_random`` and the rings (``docs/resolvers.md``,
+twelfth part), it loses no fewer pairs than ``"bands-flown"``: the third aircraft caps the
+pair's best score where each row's own pick was. Distances m, times s, angles rad CCW
+positive.
 """
 
 from __future__ import annotations
