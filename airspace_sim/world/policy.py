@@ -363,7 +363,8 @@ class AvoidancePolicy:
             if res.uses_intruder_turn_rate:
                 omega = view.x[np.maximum(enc.rows, 0), 4]
                 given["intruder_turn_rate"] = np.where(enc.rows >= 0, np.nan_to_num(omega), 0.0)
-            ids = np.where(enc.rows >= 0, view.intruder[np.maximum(enc.rows, 0)], -1)
+            if res.uses_aircraft_ids or res.uses_intruder_intent:
+                ids = np.where(enc.rows >= 0, view.intruder[np.maximum(enc.rows, 0)], -1)
             if res.uses_aircraft_ids:
                 given["aircraft_ids"] = enc.owners
                 given["intruder_ids"] = ids
