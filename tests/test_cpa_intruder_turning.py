@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from _flight import arc_path
 
 from airspace_sim import registry
 from airspace_sim.avoidance.cpa import cpa_min_ratio
@@ -30,29 +31,16 @@ def _scene(seed, n=12, k=5, c=13):
     return vo, r, vi - vo[:, None], valid, cand, omega
 
 
-def _path(speed, heading, rate, turn_s, t):
-    """(x, y) (T,) of an arc at ``rate`` for ``turn_s`` then straight, sampled at ``t`` (T,)."""
-    tt = np.minimum(t, turn_s)
-    if rate != 0.0:
-        h1 = heading + rate * tt
-        x = speed / rate * (np.sin(h1) - np.sin(heading))
-        y = speed / rate * (np.cos(heading) - np.cos(h1))
-    else:
-        h1 = np.full_like(t, heading)
-        x, y = speed * tt * np.cos(heading), speed * tt * np.sin(heading)
-    return x + (t - tt) * speed * np.cos(h1), y + (t - tt) * speed * np.sin(h1)
-
-
 def _oracle(vo, r, v, valid, cand, omega, turn_s, lookahead):
     t = np.linspace(0.0, lookahead, int(lookahead * 100) + 1)
     out = np.full(cand.shape, np.inf)
     for i in range(cand.shape[0]):
         speed, h0 = np.hypot(*vo[i]), math.atan2(vo[i, 1], vo[i, 0])
         for j, psi in enumerate(cand[i]):
-            ox, oy = _path(speed, h0, math.copysign(RATE, psi), abs(psi) / RATE, t)
+            ox, oy = arc_path(speed, h0, math.copysign(RATE, psi), abs(psi) / RATE, t)
             for q in np.flatnonzero(valid[i]):
                 vi = v[i, q] + vo[i]
-                ix, iy = _path(np.hypot(*vi), math.atan2(vi[1], vi[0]), omega[i, q], turn_s, t)
+                ix, iy = arc_path(np.hypot(*vi), math.atan2(vi[1], vi[0]), omega[i, q], turn_s, t)
                 d = np.hypot(r[i, q, 0] + ix - ox, r[i, q, 1] + iy - oy).min() / RADIUS
                 out[i, j] = min(out[i, j], d)
     return out

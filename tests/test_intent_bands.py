@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from _flight import K1, arc_path
 
 from airspace_sim import registry
 from airspace_sim.avoidance.flown_bands import FlownBandsResolver
@@ -14,28 +15,6 @@ from airspace_sim.geometry import wrap_angle
 
 RATE = math.radians(3.0)
 RADIUS = 3300.0
-K1 = dict(
-    fresh_sides_only=True,
-    switch_below=1.0,
-    switch_blocked_at_once=True,
-    boxed_best_both=True,
-    boxed_margin=0.1,
-    boxed_horizon_s=20.0,
-    boxed_horizon_guard=0.7,
-)
-
-
-def _path(speed, heading, rate, turn_s, t):
-    """(x, y) (T,) of an arc at ``rate`` (signed) for ``turn_s`` s, then straight."""
-    tt = np.minimum(t, turn_s)
-    if rate != 0.0 and turn_s > 0.0:
-        h1 = heading + rate * tt
-        x = speed / rate * (np.sin(h1) - np.sin(heading))
-        y = speed / rate * (np.cos(heading) - np.cos(h1))
-    else:
-        h1 = np.full_like(t, heading)
-        x, y = speed * tt * np.cos(heading), speed * tt * np.sin(heading)
-    return x + (t - tt) * speed * np.cos(h1), y + (t - tt) * speed * np.sin(h1)
 
 
 def test_registered():
@@ -112,12 +91,12 @@ def test_candidates_are_judged_against_the_intents_by_a_sampled_oracle(seed):
         cand = out.candidates[i]
         for c in np.flatnonzero(~np.isnan(cand))[::9]:
             psi = cand[c]
-            ox, oy = _path(speed, h0, math.copysign(RATE, psi), abs(psi) / RATE, t)
+            ox, oy = arc_path(speed, h0, math.copysign(RATE, psi), abs(psi) / RATE, t)
             best = np.inf
             for q in np.flatnonzero(valid[i]):
                 vi = v[i, q] + vo[i]
                 h = math.atan2(vi[1], vi[0])
-                ix, iy = _path(np.hypot(*vi), h, omega[i, q], turn_s[i, q], t)
+                ix, iy = arc_path(np.hypot(*vi), h, omega[i, q], turn_s[i, q], t)
                 best = min(best, np.hypot(r[i, q, 0] + ix - ox, r[i, q, 1] + iy - oy).min())
             assert out.min_ratio[i, c] == pytest.approx(best / RADIUS, abs=4.0 / RADIUS)
 

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from _flight import K1, arc_path
 
 from airspace_sim import registry
 from airspace_sim.avoidance.cpa import cpa_pair_ratios
@@ -19,31 +20,11 @@ from airspace_sim.avoidance.paired_bands import (
 
 RATE = math.radians(3.0)
 RADIUS = 3300.0
-#: the shipped dense knobs (K1, docs/resolvers.md)
-K1 = dict(
-    fresh_sides_only=True,
-    switch_below=1.0,
-    switch_blocked_at_once=True,
-    boxed_best_both=True,
-    boxed_margin=0.1,
-    boxed_horizon_s=20.0,
-    boxed_horizon_guard=0.7,
-)
 
 
 def _path(speed, heading, psi, t):
-    """(x, y) (T,) of a path that turns at RATE to ``heading + psi``, then flies straight,
-    sampled at ``t`` (T,) s."""
-    rate, turn_s = math.copysign(RATE, psi), abs(psi) / RATE
-    tt = np.minimum(t, turn_s)
-    if psi != 0.0:
-        h1 = heading + rate * tt
-        x = speed / rate * (np.sin(h1) - np.sin(heading))
-        y = speed / rate * (np.cos(heading) - np.cos(h1))
-    else:
-        h1 = np.full_like(t, heading)
-        x, y = speed * tt * np.cos(heading), speed * tt * np.sin(heading)
-    return x + (t - tt) * speed * np.cos(h1), y + (t - tt) * speed * np.sin(h1)
+    """A path that turns at RATE to ``heading + psi``, then flies straight (:func:`arc_path`)."""
+    return arc_path(speed, heading, math.copysign(RATE, psi), abs(psi) / RATE, t)
 
 
 def _oracle_distance(p0, v0, psi0, p1, v1, psi1, lookahead=120.0):

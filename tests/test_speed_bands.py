@@ -9,6 +9,7 @@ import pickle
 
 import numpy as np
 import pytest
+from _flight import K1
 
 from airspace_sim import registry
 from airspace_sim.avoidance.bands import CLEAR_TOLERANCE
@@ -26,15 +27,6 @@ from airspace_sim.scenarios.schema import (
 from airspace_sim.world import World
 
 RATE = math.radians(3.0)
-#: the shipped dense/ring knobs of bands-flown (scenarios/dense_random.toml)
-K1 = dict(
-    fresh_sides_only=True,
-    switch_below=1.0,
-    switch_blocked_at_once=True,
-    boxed_best_both=True,
-    boxed_margin=0.1,
-    boxed_horizon_s=20.0,
-)
 
 
 def test_registered():
