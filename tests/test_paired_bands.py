@@ -42,6 +42,20 @@ def test_registered():
     assert not FlownBandsResolver.uses_aircraft_ids
 
 
+def _one_pair_ratio(v0, r, v, own, other, radius, lookahead, rate0, rate1):
+    """:func:`mutual_ratio` of one pair, (A, B)."""
+    return mutual_ratio(
+        v0[None], r[None], v[None], own[None], other[None], np.array([radius]), lookahead,
+        np.array([rate0]), np.array([rate1]),
+    )[0]  # fmt: skip
+
+
+def _one_choice(others_i, others_j, mutual, own, other):
+    """:func:`pair_choice` of one pair: ``(a, b, score)``."""
+    a, b, score = pair_choice(others_i[None], others_j[None], mutual[None], own[None], other[None])
+    return int(a[0]), int(b[0]), float(score[0])
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_mutual_ratio_matches_the_sampled_oracle(seed):
     rng = np.random.default_rng(seed)
@@ -52,7 +66,7 @@ def test_mutual_ratio_matches_the_sampled_oracle(seed):
     r = rng.uniform(-12000, 12000, 2)
     own = np.radians(rng.uniform(-90, 90, 7))
     other = np.radians(np.r_[rng.uniform(-90, 90, 5), 0.0])
-    got = mutual_ratio(v0, r, v1 - v0, own, other, RADIUS, 120.0, RATE, RATE)
+    got = _one_pair_ratio(v0, r, v1 - v0, own, other, RADIUS, 120.0, RATE, RATE)
     assert got.shape == (7, 6)
     want = np.array(
         [[_oracle_distance(np.zeros(2), v0, a, r, v1, b) / RADIUS for b in other] for a in own]
@@ -62,7 +76,7 @@ def test_mutual_ratio_matches_the_sampled_oracle(seed):
 
 
 def test_mutual_ratio_nan_candidates():
-    got = mutual_ratio(
+    got = _one_pair_ratio(
         np.array([230.0, 0.0]),
         np.array([9000.0, 0.0]),
         np.array([-460.0, 0.0]),
@@ -74,6 +88,30 @@ def test_mutual_ratio_nan_candidates():
         RATE,
     )
     assert np.isnan(got[1]).all() and np.isnan(got[:, 0]).all() and np.isfinite(got[0, 1])
+
+
+def test_pairs_batched_are_the_pairs_one_at_a_time():
+    """P pairs in one call of mutual_ratio and pair_choice give each pair's own numbers."""
+    rng = np.random.default_rng(5)
+    p = 4
+    v0 = rng.normal(0, 160, (p, 2))
+    v1 = rng.normal(0, 160, (p, 2))
+    r = rng.uniform(-9000, 9000, (p, 2))
+    own = np.radians(rng.uniform(-90, 90, (p, 6)))
+    other = np.radians(rng.uniform(-90, 90, (p, 5)))
+    radius = rng.uniform(3000, 3600, p)
+    rate0, rate1 = rng.uniform(0.02, 0.06, p), rng.uniform(0.02, 0.06, p)
+    got = mutual_ratio(v0, r, v1 - v0, own, other, radius, 90.0, rate0, rate1)
+    others_i, others_j = rng.uniform(0.5, 1.5, (p, 6)), rng.uniform(0.5, 1.5, (p, 5))
+    a, b, score = pair_choice(others_i, others_j, got, own, other)
+    for q in range(p):
+        one = _one_pair_ratio(
+            v0[q], r[q], v1[q] - v0[q], own[q], other[q], radius[q], 90.0, rate0[q], rate1[q]
+        )
+        np.testing.assert_array_equal(got[q], one)
+        assert (a[q], b[q], score[q]) == _one_choice(
+            others_i[q], others_j[q], one, own[q], other[q]
+        )
 
 
 def test_mutual_pairs_only_rows_that_track_each_other_once_most_urgent_first():
@@ -118,13 +156,13 @@ def test_pair_choice_smallest_joint_turn_among_clear_else_largest_score():
     mutual = np.array([[0.5, 1.1], [1.0, 2.0], [0.8, 1.6]])
     # clear: (0,1)? others_i 0.9 no; (1,0) min(1.2,1.3,1.0)=1.0 turn 0.1; (1,1) turn 0.4;
     # (2,1) turn 0.5
-    assert pair_choice(others_i, others_j, mutual, own, other) == (1, 0, 1.0)
+    assert _one_choice(others_i, others_j, mutual, own, other) == (1, 0, 1.0)
     mutual[1, 0] = 0.7
-    assert pair_choice(others_i, others_j, mutual, own, other)[:2] == (1, 1)
+    assert _one_choice(others_i, others_j, mutual, own, other)[:2] == (1, 1)
     # nothing clear: the largest score
     mutual = np.minimum(mutual, 0.95)
     mutual[2, 1] = np.nan
-    assert pair_choice(others_i, others_j, mutual, own, other) == (1, 1, 0.95)
+    assert _one_choice(others_i, others_j, mutual, own, other) == (1, 1, 0.95)
 
 
 def _crowd(seed, side=6, spacing=4000.0):

@@ -68,80 +68,80 @@ def mutual_pairs(rows, aircraft_ids, intruder_ids, valid, urgency):
     """
     n = aircraft_ids.shape[0]
     ids = np.asarray(aircraft_ids, dtype=np.int64)
-    row_of = np.full(int(ids.max(initial=-1)) + 1, -1, dtype=np.int64)
+    intruder_ids = np.asarray(intruder_ids, dtype=np.int64)
+    row_of = np.full(int(max(ids.max(initial=-1), intruder_ids.max(initial=-1))) + 1, -1)
     row_of[ids] = np.arange(n)
-    found = []
-    for i in np.flatnonzero(rows):
-        for k in np.flatnonzero(valid[i] & (intruder_ids[i] >= 0)):
-            target = int(intruder_ids[i, k])
-            j = int(row_of[target]) if target < row_of.size else -1
-            if j <= i or not rows[j]:
-                continue
-            back = np.flatnonzero(valid[j] & (intruder_ids[j] == ids[i]))
-            if back.size:
-                found.append((urgency[i, k], i, k, j, int(back[0])))
-    found.sort(key=lambda f: f[0])
+    partner = np.where(valid & (intruder_ids >= 0), row_of[np.maximum(intruder_ids, 0)], -1)
+    ii, kk = np.nonzero(rows[:, None] & (partner > np.arange(n)[:, None]))
+    jj = partner[ii, kk]
+    keep = rows[jj]
+    ii, kk, jj = ii[keep], kk[keep], jj[keep]
+    back = valid[jj] & (intruder_ids[jj] == ids[ii][:, None])  # (M, K): j's slot of i
+    has = back.any(axis=1)
+    ii, kk, jj, ll = ii[has], kk[has], jj[has], np.argmax(back[has], axis=1)
+    # greedy matching, most urgent first: sequential by nature, over the few candidate pairs
     used = np.zeros(n, dtype=bool)
-    out = []
-    for _, i, k, j, l in found:
-        if not (used[i] or used[j]):
-            used[i] = used[j] = True
-            out.append((i, k, j, l))
-    cols = np.array(out, dtype=np.int64).reshape(-1, 4)
-    return cols[:, 0], cols[:, 1], cols[:, 2], cols[:, 3]
+    take = []
+    for m in np.argsort(urgency[ii, kk], kind="stable"):
+        if not (used[ii[m]] or used[jj[m]]):
+            used[ii[m]] = used[jj[m]] = True
+            take.append(m)
+    take = np.array(take, dtype=np.int64)
+    return ii[take], kk[take], jj[take], ll[take]
 
 
 def mutual_ratio(
     own_velocity, rel_position, rel_velocity, own_candidates, other_candidates, radius,
     lookahead_s, own_turn_rate, other_turn_rate,
 ):  # fmt: skip
-    """(A, B) minimum distance / ``radius`` over ``[0, lookahead_s]`` of two aircraft, the
-    first flying ``own_candidates`` (A,) rad and the second ``other_candidates`` (B,) rad,
-    each turning at its own rate (rad/s) to its new heading, then straight.
+    """(P, A, B) minimum distance / ``radius`` over ``[0, lookahead_s]`` of P pairs of
+    aircraft, the first flying ``own_candidates`` (P, A) rad and the second
+    ``other_candidates`` (P, B) rad, each turning at its own rate (``own_turn_rate``,
+    ``other_turn_rate`` (P,) rad/s) to its new heading, then straight.
 
-    own_velocity (2,) m/s; rel_position, rel_velocity (2,) the second minus the first, m and
-    m/s; radius m. NaN candidates give NaN."""
+    own_velocity (P, 2) m/s; rel_position, rel_velocity (P, 2) the second minus the first, m
+    and m/s; radius (P,) m. NaN candidates give NaN. One kernel call, a row per (pair, b)."""
     other = np.asarray(other_candidates, dtype=float)
-    b = other.size
-    rate = float(other_turn_rate)
-    turn = np.where(np.isnan(other), 0.0, other)
+    own = np.asarray(own_candidates, dtype=float)
+    p, b = other.shape
+    rep = lambda a: np.repeat(np.asarray(a, dtype=float), b, axis=0)  # noqa: E731
+    rate = rep(other_turn_rate)
+    turn = np.where(np.isnan(other), 0.0, other).reshape(p * b)
     out = cpa_min_ratio_intruder_turning(
-        np.broadcast_to(np.asarray(own_velocity, dtype=float), (b, 2)),
-        np.broadcast_to(np.asarray(rel_position, dtype=float), (b, 1, 2)),
-        np.broadcast_to(np.asarray(rel_velocity, dtype=float), (b, 1, 2)),
-        np.ones((b, 1), dtype=bool),
-        np.broadcast_to(np.asarray(own_candidates, dtype=float), (b, np.size(own_candidates))),
-        radius,
+        rep(own_velocity),
+        rep(rel_position)[:, None, :],
+        rep(rel_velocity)[:, None, :],
+        np.ones((p * b, 1), dtype=bool),
+        rep(own),
+        rep(radius)[:, None],
         lookahead_s,
-        np.full(b, float(own_turn_rate)),
+        rep(own_turn_rate),
         (np.sign(turn) * rate)[:, None],
         (np.abs(turn) / rate)[:, None],
-    )
-    return np.where(np.isnan(other)[:, None], np.nan, out).T
+    ).reshape(p, b, own.shape[1])
+    return np.where(np.isnan(other)[:, :, None], np.nan, out).transpose(0, 2, 1)
 
 
 def pair_choice(others_i, others_j, mutual, own_candidates, other_candidates):
-    """``(a, b, score)``: the pair's pick of the module docstring and its score; ``others_i``
-    (A,), ``others_j`` (B,), ``mutual`` (A, B) ratios (NaN or −inf: unusable), candidates
-    (A,), (B,) rad."""
-    score = np.minimum(np.minimum(others_i[:, None], others_j[None, :]), mutual)
-    score = np.where(np.isnan(score), -np.inf, score)
+    """``(a (P,), b (P,), score (P,))``: each pair's pick of the module docstring and its
+    score; ``others_i`` (P, A), ``others_j`` (P, B), ``mutual`` (P, A, B) ratios (NaN or
+    −inf: unusable), candidates (P, A), (P, B) rad."""
+    score = pair_scores(others_i, others_j, mutual)
+    p, a_n, b_n = score.shape
     clear = score >= 1.0 - CLEAR_TOLERANCE
-    if clear.any():
-        turn = np.abs(own_candidates)[:, None] + np.abs(other_candidates)[None, :]
-        flat = np.argmin(np.where(clear, turn, np.inf))
-    else:
-        flat = np.argmax(score)
-    a, b = np.unravel_index(flat, score.shape)
-    return int(a), int(b), float(score[a, b])
+    turn = np.abs(own_candidates)[:, :, None] + np.abs(other_candidates)[:, None, :]
+    smallest = np.argmin(np.where(clear, turn, np.inf).reshape(p, -1), axis=1)
+    largest = np.argmax(score.reshape(p, -1), axis=1)
+    flat = np.where(clear.any(axis=(1, 2)), smallest, largest)
+    a, b = np.unravel_index(flat, (a_n, b_n))
+    return a, b, score.reshape(p, -1)[np.arange(p), flat]
 
 
-def pair_score(others_i, others_j, mutual, a, b):
-    """The pair's score at candidates ``a``, ``b`` (−inf where either is −1)."""
-    if a < 0 or b < 0:
-        return -np.inf
-    s = min(others_i[a], others_j[b], mutual[a, b])
-    return -np.inf if np.isnan(s) else float(s)
+def pair_scores(others_i, others_j, mutual):
+    """(P, A, B) the pairs' scores ``min(others_i[a], others_j[b], mutual[a, b])`` (−inf
+    where any is NaN)."""
+    score = np.minimum(np.minimum(others_i[:, :, None], others_j[:, None, :]), mutual)
+    return np.where(np.isnan(score), -np.inf, score)
 
 
 @registry.register("resolver", "bands-flown-paired")
@@ -183,26 +183,35 @@ class PairedFlownBandsResolver(FlownBandsResolver):
             vo, r, v, valid, np.zeros((n, 1)), radius, self.params.lookahead_s
         )[:, :, 0]
         side = np.broadcast_to(np.asarray(committed_side, dtype=float), (n,))
-        best = best.copy()
+        i, k, j, l = mutual_pairs(boxed, aircraft_ids, intruder_ids, valid, urgency)
+        if i.size == 0:
+            return best
+        p = i.size
         safe = np.where(usable, cand, np.nan)
-        for i, k, j, l in zip(*mutual_pairs(boxed, aircraft_ids, intruder_ids, valid, urgency)):
-            others = []
-            for row, slot in ((i, k), (j, l)):
-                alone = valid[row].copy()
-                alone[slot] = False
-                ratio = cpa_min_ratio_turning(
-                    vo[row : row + 1], r[row : row + 1], v[row : row + 1], alone[None],
-                    np.where(usable[row], cand[row], 0.0)[None], radius[row : row + 1],
-                    self.params.lookahead_s, rate[row : row + 1],
-                )[0]  # fmt: skip
-                others.append(np.where(usable[row], ratio, -np.inf))
-            mutual = mutual_ratio(
-                vo[i], r[i, k], v[i, k], safe[i], safe[j], radius[i, k], self.params.lookahead_s,
-                rate[i], rate[j],
-            )  # fmt: skip
-            col_i, col_j = int(side[i] > 0), int(side[j] > 0)
-            a, b, score = pair_choice(others[0], others[1], mutual, safe[i], safe[j])
-            now = pair_score(others[0], others[1], mutual, best[i, col_i], best[j, col_j])
-            if score > now + self.params.pair_margin and score >= self.params.pair_min_score:
-                best[i, col_i], best[j, col_j] = a, b
+        # each row of a pair against its intruders but the other, as flown: one kernel call
+        rows, slots = np.concatenate([i, j]), np.concatenate([k, l])
+        alone = valid[rows].copy()
+        alone[np.arange(2 * p), slots] = False
+        others = cpa_min_ratio_turning(
+            vo[rows], r[rows], v[rows], alone, np.where(usable[rows], cand[rows], 0.0),
+            radius[rows], self.params.lookahead_s, rate[rows],
+        )  # fmt: skip
+        others = np.where(usable[rows], others, -np.inf)
+        others_i, others_j = others[:p], others[p:]
+        mutual = mutual_ratio(
+            vo[i], r[i, k], v[i, k], safe[i], safe[j], radius[i, k], self.params.lookahead_s,
+            rate[i], rate[j],
+        )  # fmt: skip
+        a, b, score = pair_choice(others_i, others_j, mutual, safe[i], safe[j])
+        col_i, col_j = (side[i] > 0).astype(np.int64), (side[j] > 0).astype(np.int64)
+        now_a, now_b = best[i, col_i], best[j, col_j]
+        # the rows' own picks scored the same way (−inf where a row has none)
+        now = pair_scores(others_i, others_j, mutual)[
+            np.arange(p), np.maximum(now_a, 0), np.maximum(now_b, 0)
+        ]
+        now = np.where((now_a >= 0) & (now_b >= 0), now, -np.inf)
+        swap = (score > now + self.params.pair_margin) & (score >= self.params.pair_min_score)
+        best = best.copy()
+        best[i[swap], col_i[swap]] = a[swap]
+        best[j[swap], col_j[swap]] = b[swap]
         return best
