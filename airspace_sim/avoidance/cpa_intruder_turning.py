@@ -2,9 +2,10 @@
 :mod:`~airspace_sim.avoidance.cpa_turning`) *and* each intruder turning at its own estimated
 rate for a while, then straight: the intruder's manoeuvre in the ownship's prediction.
 
-Both paths are coordinated-turn arcs followed by straight flight, in closed form; they are
-evaluated every ``step_s`` seconds (and at the look-ahead) and the relative track between
-samples is taken as straight, so the minimum over each piece is a clamped CPA. At 230 m/s and
+Both paths are coordinated-turn arcs followed by straight flight, in closed form; while
+either turns they are evaluated every ``step_s`` seconds and the relative track between
+samples is taken as straight, so the minimum over each piece is a clamped CPA; once both fly
+straight the rest of the look-ahead is one exact straight piece. At 230 m/s and
 3°/s a one-second chord departs from its arc by under 2 m. Its kernel and the helpers it calls
 are kept in this one module (numba's on-disk cache of a kernel does not see edits of helpers in
 other modules). Distances m, velocities m/s, times s, angles rad CCW positive.
@@ -137,16 +138,25 @@ def _kernel(vo, r, v, valid, psi, radius, lookahead_s, w, wi, turn_s, step_s):  
             for k in range(n_int):
                 if not valid[n, k]:
                     continue
+                # once both turns are over the relative track is straight: one segment
+                # from the first sample after both to the look-ahead is exact
+                turn_end = max(tau, turn_s[n, k] if wi[n, k] != 0.0 else 0.0)
+                last = min(int(np.ceil(turn_end / step_s - 1e-9)), n_s)
                 px = int_x[k, 0] - own_x[0]
                 py = int_y[k, 0] - own_y[0]
                 d2 = px * px + py * py
-                for s in range(1, n_s + 1):
+                for s in range(1, last + 1):
                     qx = int_x[k, s] - own_x[s]
                     qy = int_y[k, s] - own_y[s]
                     dt = times[s] - times[s - 1]
                     if dt > 0.0:
                         d2 = min(d2, _seg_min(px, py, (qx - px) / dt, (qy - py) / dt, dt))
                     px, py = qx, qy
+                dt = times[n_s] - times[last]
+                if dt > 0.0:
+                    qx = int_x[k, n_s] - own_x[n_s]
+                    qy = int_y[k, n_s] - own_y[n_s]
+                    d2 = min(d2, _seg_min(px, py, (qx - px) / dt, (qy - py) / dt, dt))
                 best = min(best, d2 * (1.0 / (radius[n, k] * radius[n, k])))
             out[n, c] = np.sqrt(best)
     return out
