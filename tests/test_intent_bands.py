@@ -10,7 +10,11 @@ from _flight import K1, arc_path
 
 from airspace_sim import registry
 from airspace_sim.avoidance.flown_bands import FlownBandsResolver
-from airspace_sim.avoidance.intent_bands import IntentFlownBandsResolver, intent_turns
+from airspace_sim.avoidance.intent_bands import (
+    IntentFlownBandsResolver,
+    crossing_times,
+    intent_turns,
+)
 from airspace_sim.geometry import wrap_angle
 
 RATE = math.radians(3.0)
@@ -266,6 +270,53 @@ def test_priority_by_age_uses_only_intents_older_than_the_ownships():
     )  # fmt: skip
     first = (age > mine[:, None]) | ((age == mine[:, None]) & (ids < own[:, None]))
     kept = np.where((ids >= 0) & first, intent, 0.0)
+    assert 0 < np.count_nonzero(kept) < np.count_nonzero(intent)
+    ref = _resolve(IntentFlownBandsResolver, (vo, r, v, valid, mx, kept, limit), **K1)
+    for field in ("heading_change", "first_clear", "best_blocked", "min_ratio"):
+        np.testing.assert_array_equal(getattr(out, field), getattr(ref, field))
+
+
+def test_crossing_times_solve_where_the_straight_tracks_meet():
+    """Against each pair's 2x2 system ``vo·t_own = r + vi·t_intruder`` solved on its own;
+    tracks within 10° of parallel have no crossing (NaN)."""
+    rng = np.random.default_rng(11)
+    n, k = 40, 5
+    vo = rng.normal(size=(n, 2)) * 200.0
+    r = rng.normal(size=(n, k, 2)) * 20000.0
+    v = rng.normal(size=(n, k, 2)) * 300.0
+    v[0, 0] = 0.0  # same velocity: parallel
+    v[1, 0] = -2.0 * vo[1]  # head-on: antiparallel
+    t_own, t_intruder = crossing_times(vo, r, v)
+    for i in range(n):
+        for j in range(k):
+            vi = v[i, j] + vo[i]
+            angle = abs(math.atan2(vo[i, 0] * vi[1] - vo[i, 1] * vi[0], np.dot(vo[i], vi)))
+            if min(angle, math.pi - angle) <= math.radians(10.0):
+                assert np.isnan(t_own[i, j]) and np.isnan(t_intruder[i, j])
+                continue
+            a, b = np.linalg.solve(np.column_stack([vo[i], -vi]), r[i, j])
+            np.testing.assert_allclose([t_own[i, j], t_intruder[i, j]], [a, b], rtol=1e-9)
+    assert np.isnan(t_own[0, 0]) and np.isnan(t_own[1, 0])
+    # seen from the intruder the two times swap: the order has no two-cycles
+    vi = v[2, 1] + vo[2]
+    back = crossing_times(vi[None], -r[2, 1][None, None], -v[2, 1][None, None])
+    np.testing.assert_allclose([back[0][0, 0], back[1][0, 0]], [t_intruder[2, 1], t_own[2, 1]])
+
+
+def test_priority_by_crossing_uses_only_intents_of_intruders_crossing_first():
+    """An intruder's intent counts when it reaches the tracks' crossing at least
+    ``crossing_margin_s`` before the ownship; the others (and near-parallel tracks) are
+    predicted straight."""
+    vo, r, v, valid, mx, intent, limit = _scene(8)
+    n = vo.shape[0]
+    resolver = IntentFlownBandsResolver(
+        IntentFlownBandsResolver.Params(priority_by_crossing=True, crossing_margin_s=3.0, **K1)
+    )
+    out = resolver.resolve(vo, r, v, valid, mx, turn_rate=np.full(n, RATE),
+                           committed_side=np.full(n, -1.0), intruder_intent=intent,
+                           intruder_turn_limit=limit)  # fmt: skip
+    t_own, t_intruder = crossing_times(vo, r, v)
+    kept = np.where(t_own - t_intruder > 3.0, intent, 0.0)
     assert 0 < np.count_nonzero(kept) < np.count_nonzero(intent)
     ref = _resolve(IntentFlownBandsResolver, (vo, r, v, valid, mx, kept, limit), **K1)
     for field in ("heading_change", "first_clear", "best_blocked", "min_ratio"):

@@ -54,6 +54,23 @@ from airspace_sim.avoidance.flown_bands import (
 from airspace_sim.parts import param
 
 
+def crossing_times(vo, r, v):
+    """``(t_own (n, k) s, t_intruder (n, k) s)``: when the ownship (at the origin, velocity
+    ``vo`` (n, 2) m/s) and each intruder (relative position ``r`` (n, k, 2) m, relative
+    velocity ``v`` (n, k, 2) m/s) reach the point where their straight tracks cross (negative:
+    passed it; NaN where the tracks are within 10° of parallel, which have no crossing to
+    order)."""
+    vi = v + vo[:, None, :]
+    own = np.broadcast_to(vo[:, None, :], vi.shape)
+    det = own[..., 0] * vi[..., 1] - own[..., 1] * vi[..., 0]
+    norm = np.linalg.norm(own, axis=-1) * np.linalg.norm(vi, axis=-1)
+    crossing = np.abs(det) > np.sin(np.radians(10.0)) * norm
+    det = np.where(crossing, det, np.nan)
+    t_own = (r[..., 0] * vi[..., 1] - r[..., 1] * vi[..., 0]) / det
+    t_intruder = (r[..., 0] * own[..., 1] - r[..., 1] * own[..., 0]) / det
+    return t_own, t_intruder
+
+
 def intent_turns(intent, turn_limit):
     """``(omega (n, k) rad/s, turn_s (n, k) s)``: turning toward each intruder's intent
     (``intent`` (n, k) rad, the heading change from its track's heading to the heading it
@@ -110,6 +127,20 @@ class IntentFlownBandsResolver(FlownBandsResolver):
             "longer than the ownship's own (equal ages: the lower aircraft index first)",
         )
 
+        priority_by_crossing: bool = param(
+            False,
+            doc="prioritized planning by the pair's crossing: use an intruder's intent only "
+            "when it reaches the point where the two straight tracks cross at least "
+            "crossing_margin_s before the ownship (near-parallel tracks: straight)",
+        )
+        crossing_margin_s: float = param(
+            5.0,
+            unit="s",
+            doc="how much earlier an intruder must reach the crossing for its intent to count "
+            "(priority_by_crossing)",
+            ge=0.0,
+        )
+
     uses_intruder_intent = True
     uses_aircraft_ids = True
 
@@ -135,6 +166,11 @@ class IntentFlownBandsResolver(FlownBandsResolver):
             mine = np.asarray(mine, dtype=float)[:, None]
             older = (age > mine) | ((age == mine) & (ids < np.asarray(own)[:, None]))
             intent = np.where((ids >= 0) & older, intent, 0.0)
+        if self.params.priority_by_crossing:
+            vo, r, v = intruders["geometry"][:3]
+            t_own, t_intruder = crossing_times(vo, r, v)
+            first = t_own - t_intruder > self.params.crossing_margin_s
+            intent = np.where(first, intent, 0.0)
         if self.params.intent_min_age_s > 0.0:
             age = intruders["intent_age_s"]
             held = age is not None and np.asarray(age) >= self.params.intent_min_age_s
