@@ -1,8 +1,8 @@
-"""Helpers shared by the band-resolver tests: the shipped dense knobs and a closed-form path."""
+"""Helpers shared by the band-resolver tests: the shipped band knobs and a closed-form path."""
 
 import numpy as np
 
-#: the shipped dense/ring knobs of bands-flown (K1, scenarios/dense_random.toml)
+#: the shipped knobs of bands-flown (K1: scenarios/ring.toml; dense_random.toml adds intents)
 K1 = dict(
     fresh_sides_only=True,
     switch_below=1.0,

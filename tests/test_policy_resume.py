@@ -17,7 +17,10 @@ R1 = R_SAFE * (1 + MARGIN + RESUME_MARGIN)  # m, the resume radius
 
 
 def _policy(rule, n=2):
-    sc = load("dense_random", [f'resolver.resume_rule="{rule}"', "resolver.lookahead=120.0"])
+    sc = load(
+        "dense_random",
+        [f'resolver.resume_rule="{rule}"', "resolver.lookahead=120.0", f"resolver.margin={MARGIN}"],
+    )
     pol = AvoidancePolicy(sc, 1.0, np.ones(n, bool), np.ones(n, bool))
     assert (pol.r_safe, pol.margin, pol.resume_margin, pol.lookahead_s) == (
         R_SAFE,

@@ -394,7 +394,10 @@ def test_resume_margin_shrinks_over_resume_decay_s(off_route_s, clear):
     from airspace_sim.world.control import Encounters
     from airspace_sim.world.policy import AvoidancePolicy
 
-    sc = load("dense_random", ["resolver.resume_decay_s=30.0", "resolver.lookahead=120.0"])
+    sc = load(
+        "dense_random",
+        ["resolver.resume_decay_s=30.0", "resolver.lookahead=120.0", "resolver.margin=0.1"],
+    )
     avoid = AvoidancePolicy(sc, 1.0, np.ones(2, bool), np.ones(2, bool))
     assert (avoid.resume_margin, avoid.margin, avoid.r_safe) == (1.5, 0.1, 3000.0)
     avoid.off_route_s = np.array([off_route_s, 0.0])
@@ -427,6 +430,7 @@ def test_resume_margin_stops_at_resume_margin_floor(off_route_s, clear):
             "resolver.resume_decay_s=30.0",
             "resolver.lookahead=120.0",
             "resolver.resume_margin_floor=0.5",
+            "resolver.margin=0.1",
         ],
     )
     avoid = AvoidancePolicy(sc, 1.0, np.ones(2, bool), np.ones(2, bool))
