@@ -31,8 +31,12 @@ choice: all of them (default), a share of each intended turn (``intent_share``),
 held for a while (``intent_min_age_s``), only on ownships with few conflicts
 (``intent_max_conflicts``), or a priority order in which the ownship uses only the intents of
 the aircraft that plan before it and predicts the others straight, as prioritized planning
-does (Erdmann & Lozano-Pérez 1987): by aircraft index (``priority``) or by who committed to
-its intent first (``priority_by_age``, ties by index). ``trust_intent = false`` judges each
+does (Erdmann & Lozano-Pérez 1987): by aircraft index (``priority``), by who committed to
+its intent first (``priority_by_age``, ties by index), or by the pair's geometry
+(``priority_by_crossing``: the intruder that reaches the crossing of the two straight tracks
+first is relied on, the other predicted straight; no pair relies on each other, and the
+near-parallel neighbours of a converging ring not at all; ``scenarios/dense_random.toml``
+runs this one, ``docs/resolvers.md`` thirteenth part). ``trust_intent = false`` judges each
 candidate against the worse of the straight and the intended path instead.
 Distances m, times s, angles rad CCW positive.
 """
