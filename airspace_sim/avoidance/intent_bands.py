@@ -130,7 +130,6 @@ class IntentFlownBandsResolver(FlownBandsResolver):
             doc="prioritized planning by who committed first: use only the intents held "
             "longer than the ownship's own (equal ages: the lower aircraft index first)",
         )
-
         priority_by_crossing: bool = param(
             False,
             doc="prioritized planning by the pair's crossing: use an intruder's intent only "
