@@ -5,7 +5,7 @@ experiment, not a shipped resolver): ``bands-flown`` whose clear radius grows to
 resolver's ``clear_radius`` hook. The world's prefilter is off (it tests the scenario's
 radius). Measured on dense_random in docs/resolvers.md (twelfth part)::
 
-    python docs/benchmarks/crowd_margin.py dense:0-63 --set resolver.margin=0.1 \
+    python docs/benchmarks/crowd_margin.py dense:0-63 --set resolver.margin=0.1 \\
         --kinds bands-flown-crowd:K1[:per_intruder=true]
 
 Arguments as ``resolver_candidates.py``'s.
