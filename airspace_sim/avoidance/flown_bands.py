@@ -454,10 +454,12 @@ class FlownBandsResolver(BandsResolver):
             )[:, 0]
             conflict = conflict | ~(ahead >= 1.0 - CLEAR_TOLERANCE)
         # as flown only where the choice matters (a clear ownship keeps ψ = 0): the at-once
-        # ratio elsewhere
+        # ratio elsewhere; rows whose turned prediction replaces it are judged below instead
+        replaced = turning is not None and turning.replaces
         flown = as_flown_on_rows(
-            ratio, conflict, vo, r, v, valid, safe, usable, radius, p.lookahead_s, turn_rate
-        )
+            ratio, conflict & ~replaced, vo, r, v, valid, safe, usable, radius, p.lookahead_s,
+            turn_rate,
+        )  # fmt: skip
         if turning is not None:
             rate, omega, turn_s = turning[:3]
             rows = np.flatnonzero(conflict)
