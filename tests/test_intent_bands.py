@@ -68,6 +68,21 @@ def _resolve(cls, scene, intents=True, side=-1.0, **params):
     )
 
 
+def _assert_same_output(out, ref):
+    for field in ("heading_change", "first_clear", "best_blocked", "min_ratio"):
+        np.testing.assert_array_equal(getattr(out, field), getattr(ref, field))
+
+
+def _assert_is_masked_trust(out, scene, kept):
+    """``out`` equals full trust of the intents ``kept`` (the scene's intents, some zeroed:
+    predicted straight), and the mask kept some intents and dropped others."""
+    vo, r, v, valid, mx, intent, limit = scene
+    assert 0 < np.count_nonzero(kept) < np.count_nonzero(intent)
+    _assert_same_output(
+        out, _resolve(IntentFlownBandsResolver, (vo, r, v, valid, mx, kept, limit), **K1)
+    )
+
+
 def test_without_intents_it_is_bands_flown():
     scene = _scene(0)
     out = _resolve(IntentFlownBandsResolver, scene, intents=False, **K1)
@@ -184,8 +199,7 @@ def test_intent_share_scales_the_intended_turns():
     finite = np.isfinite(shared.min_ratio)
     # the share matters on this scene
     assert np.abs(shared.min_ratio[finite] - full.min_ratio[finite]).max() > 1e-3
-    for field in ("heading_change", "first_clear", "best_blocked", "min_ratio"):
-        np.testing.assert_array_equal(getattr(shared, field), getattr(scaled, field))
+    _assert_same_output(shared, scaled)
 
 
 def test_priority_uses_only_the_intents_of_lower_indices():
@@ -202,10 +216,7 @@ def test_priority_uses_only_the_intents_of_lower_indices():
     out = resolver.resolve(vo, r, v, valid, mx, intruder_intent=intent, intruder_turn_limit=limit,
                            aircraft_ids=own, intruder_ids=ids, **kw)  # fmt: skip
     kept = np.where((ids >= 0) & (ids < own[:, None]), intent, 0.0)
-    assert 0 < np.count_nonzero(kept) < np.count_nonzero(intent)
-    ref = _resolve(IntentFlownBandsResolver, (vo, r, v, valid, mx, kept, limit), **K1)
-    for field in ("heading_change", "first_clear", "best_blocked", "min_ratio"):
-        np.testing.assert_array_equal(getattr(out, field), getattr(ref, field))
+    _assert_is_masked_trust(out, (vo, r, v, valid, mx, intent, limit), kept)
 
 
 def test_intent_min_age_and_max_conflicts_mask_intents():
@@ -226,10 +237,7 @@ def test_intent_min_age_and_max_conflicts_mask_intents():
     alone = cpa_pair_ratios(vo, r, v, valid, np.zeros((n, 1)), RADIUS, 120.0)[:, :, 0]
     few = ((alone < 1.0 - 1e-9).sum(axis=1) <= 1)[:, None]
     kept = np.where((age >= 8.0) & few, intent, 0.0)
-    assert 0 < np.count_nonzero(kept) < np.count_nonzero(intent)
-    ref = _resolve(IntentFlownBandsResolver, (vo, r, v, valid, mx, kept, limit), **K1)
-    for field in ("heading_change", "first_clear", "best_blocked", "min_ratio"):
-        np.testing.assert_array_equal(getattr(out, field), getattr(ref, field))
+    _assert_is_masked_trust(out, (vo, r, v, valid, mx, intent, limit), kept)
 
 
 def test_policy_intent_age_counts_seconds_the_intent_held():
@@ -270,10 +278,7 @@ def test_priority_by_age_uses_only_intents_older_than_the_ownships():
     )  # fmt: skip
     first = (age > mine[:, None]) | ((age == mine[:, None]) & (ids < own[:, None]))
     kept = np.where((ids >= 0) & first, intent, 0.0)
-    assert 0 < np.count_nonzero(kept) < np.count_nonzero(intent)
-    ref = _resolve(IntentFlownBandsResolver, (vo, r, v, valid, mx, kept, limit), **K1)
-    for field in ("heading_change", "first_clear", "best_blocked", "min_ratio"):
-        np.testing.assert_array_equal(getattr(out, field), getattr(ref, field))
+    _assert_is_masked_trust(out, (vo, r, v, valid, mx, intent, limit), kept)
 
 
 def test_crossing_times_solve_where_the_straight_tracks_meet():
@@ -317,7 +322,4 @@ def test_priority_by_crossing_uses_only_intents_of_intruders_crossing_first():
                            intruder_turn_limit=limit)  # fmt: skip
     t_own, t_intruder = crossing_times(vo, r, v)
     kept = np.where(t_own - t_intruder > 3.0, intent, 0.0)
-    assert 0 < np.count_nonzero(kept) < np.count_nonzero(intent)
-    ref = _resolve(IntentFlownBandsResolver, (vo, r, v, valid, mx, kept, limit), **K1)
-    for field in ("heading_change", "first_clear", "best_blocked", "min_ratio"):
-        np.testing.assert_array_equal(getattr(out, field), getattr(ref, field))
+    _assert_is_masked_trust(out, (vo, r, v, valid, mx, intent, limit), kept)
