@@ -137,7 +137,10 @@ def test_no_worse_turns_back_sooner_on_an_overtaking_and_keeps_r_safe():
 
 
 def test_resume_rule_default_and_validation():
-    assert load("ring").resolver.resume_rule == "hold"
+    from airspace_sim.scenarios.schema import ResolverSpec
+
+    assert ResolverSpec().resume_rule == "hold"
+    assert load("ring").resolver.resume_rule == "no-worse"  # the shipped ring's choice
     assert load("ring", ['resolver.resume_rule="partial"']).resolver.resume_rule == "partial"
     with pytest.raises(UserError) as info:
         load("ring", ['resolver.resume_rule="sideways"'])
