@@ -97,6 +97,12 @@ def _seg_min(rx, ry, vx, vy, dt):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
+def _samples_until(until_s, step_s, n_s):  # pragma: no cover - compiled
+    """Index of the first sample at or after ``until_s`` s (capped at the last, ``n_s``)."""
+    return min(int(np.ceil(until_s / step_s - 1e-9)), n_s)
+
+
+@njit(cache=True, error_model="numpy")
 def _kernel(vo, r, v, valid, psi, radius, lookahead_s, w, wi, turn_s, step_s):  # pragma: no cover
     n_own, n_cand = psi.shape
     n_int = valid.shape[1]
@@ -110,30 +116,51 @@ def _kernel(vo, r, v, valid, psi, radius, lookahead_s, w, wi, turn_s, step_s):  
     # the intruders' sampled positions relative to the ownship's start, once per ownship
     int_x = np.empty((n_int, n_s + 1))
     int_y = np.empty((n_int, n_s + 1))
+    if n_int == 0:
+        return out
     for n in range(n_own):
         speed = np.hypot(vo[n, 0], vo[n, 1])
         h0 = np.arctan2(vo[n, 1], vo[n, 0])
+        turns = w[n] > 0.0 and np.isfinite(w[n])
+        # only the samples up to the end of both turns, and the last, are ever read: the
+        # longest own turn over the candidates, the longest intruder turn over the slots
+        own_turn_max = 0.0
+        if turns:
+            for c in range(n_cand):
+                if not np.isnan(psi[n, c]):
+                    own_turn_max = max(own_turn_max, abs(psi[n, c]) / w[n])
+        int_turn_max = 0.0
+        for k in range(n_int):
+            if valid[n, k] and wi[n, k] != 0.0:
+                int_turn_max = max(int_turn_max, turn_s[n, k])
         for k in range(n_int):
             if not valid[n, k]:
                 continue
             vix = v[n, k, 0] + vo[n, 0]
             viy = v[n, k, 1] + vo[n, 1]
             si, hi = np.hypot(vix, viy), np.arctan2(viy, vix)
-            for s in range(n_s + 1):
+            own_k = turn_s[n, k] if wi[n, k] != 0.0 else 0.0
+            needed = _samples_until(max(own_turn_max, own_k), step_s, n_s)
+            for s in range(needed + 1):
                 ix, iy = _arc_then_straight(si, hi, wi[n, k], turn_s[n, k], times[s])
                 int_x[k, s] = r[n, k, 0] + ix
                 int_y[k, s] = r[n, k, 1] + iy
+            ix, iy = _arc_then_straight(si, hi, wi[n, k], turn_s[n, k], times[n_s])
+            int_x[k, n_s] = r[n, k, 0] + ix
+            int_y[k, n_s] = r[n, k, 1] + iy
         for c in range(n_cand):
             p = psi[n, c]
             if np.isnan(p) and n_int > 0:
                 out[n, c] = np.nan
                 continue
-            if w[n] > 0.0 and np.isfinite(w[n]):
+            if turns:
                 rate, tau, h_start = (w[n] if p > 0 else -w[n]), abs(p) / w[n], h0
             else:  # the heading change at once
                 rate, tau, h_start = 0.0, 0.0, h0 + p
-            for s in range(n_s + 1):
+            needed = _samples_until(max(tau, int_turn_max), step_s, n_s)
+            for s in range(needed + 1):
                 own_x[s], own_y[s] = _arc_then_straight(speed, h_start, rate, tau, times[s])
+            own_x[n_s], own_y[n_s] = _arc_then_straight(speed, h_start, rate, tau, times[n_s])
             best = np.inf
             for k in range(n_int):
                 if not valid[n, k]:
@@ -141,7 +168,7 @@ def _kernel(vo, r, v, valid, psi, radius, lookahead_s, w, wi, turn_s, step_s):  
                 # once both turns are over the relative track is straight: one segment
                 # from the first sample after both to the look-ahead is exact
                 turn_end = max(tau, turn_s[n, k] if wi[n, k] != 0.0 else 0.0)
-                last = min(int(np.ceil(turn_end / step_s - 1e-9)), n_s)
+                last = _samples_until(turn_end, step_s, n_s)
                 px = int_x[k, 0] - own_x[0]
                 py = int_y[k, 0] - own_y[0]
                 d2 = px * px + py * py
