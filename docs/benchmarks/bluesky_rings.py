@@ -1,7 +1,8 @@
-"""Side by side on the converging ring: our ``bands`` on IMM tracks vs BlueSky's MVP on truth.
+"""Side by side on the converging ring: our resolver on IMM tracks vs BlueSky's MVP on truth.
 
     python docs/benchmarks/bluesky_rings.py --sizes 32 64 --seeds 0-4 \\
-        --bluesky-python /path/to/bluesky-venv/bin/python [--jitter 50] [--out rows.jsonl]
+        --bluesky-python /path/to/bluesky-venv/bin/python [--jitter 50] [--out rows.jsonl] \\
+        [--ours shipped|bands]
 
 Run it with the project's venv (``airspace_sim`` importable); BlueSky (``pip install
 bluesky-simulator==1.1.1``) lives in its own venv, given by ``--bluesky-python``, and this
@@ -15,7 +16,9 @@ destination stays the unjittered opposite point). r_safe 3000 m, look-ahead 120 
 10%, run for ``2R/v + 300 s`` with 1 s steps.
 
 - ours: :func:`~airspace_sim.world.benchmark.ring_scenario` (IMM tracks from σ = 50 m
-  measurements, ``bands``, heading only, 3°/s), metrics from ``World.metrics()``.
+  measurements, heading only, 3°/s) with ``--ours``' resolver: ``shipped`` (default) the
+  whole ``[resolver]`` of ``scenarios/ring.toml`` (kind, params, margin, resume rule), or
+  ``bands`` with the policy's defaults; metrics from ``World.metrics()``.
 - BlueSky 1.1.1: ``ASAS ON``, ``RESO MVP`` (heading *and* speed, its default; ``--mvp-hdg``
   for heading only), ``ZONER`` = r_safe, ``DTLOOK`` 120 s, ``RFACH`` 1.1, true states, its
   own turn and speed dynamics (OpenAP B744 at FL200, CAS set for 230 m/s TAS), each
@@ -109,16 +112,33 @@ class Tally:
         }
 
 
-def run_ours(n, seed, jitter):
-    """Our world on the ring: bands on IMM tracks (module docstring)."""
+#: ``--ours`` → the side's label in the rows and the table
+OURS = {"shipped": "ours (ring.toml, IMM)", "bands": "ours (bands, IMM)"}
+
+
+def our_scenario(n, seed, ours="shipped", **kw):
+    """``ring_scenario(n, seed=seed, **kw)`` with ``ours``' resolver: ``"shipped"`` the whole
+    ``[resolver]`` of ``scenarios/ring.toml``, ``"bands"`` the generator's own."""
+    import dataclasses
+
+    from airspace_sim.scenarios import load
+    from airspace_sim.world.benchmark import ring_scenario
+
+    sc = ring_scenario(n, seed=seed, **kw)
+    if ours == "shipped":
+        sc = dataclasses.replace(sc, resolver=load("ring").resolver)
+    return sc
+
+
+def run_ours(n, seed, jitter, ours="shipped"):
+    """Our world on the ring, IMM tracks, ``ours``' resolver (module docstring)."""
     import dataclasses
 
     from airspace_sim.scenarios import build_aircraft
     from airspace_sim.world import World
-    from airspace_sim.world.benchmark import ring_scenario
 
     start, heading, dest, radius, duration = ring_traffic(n, seed, jitter)
-    sc = ring_scenario(n, seed=seed, radius=radius, duration=duration)
+    sc = our_scenario(n, seed, ours, radius=radius, duration=duration)
     specs = None  # unjittered: the generator's own specs, bit for bit
     if jitter > 0:
         specs = [
@@ -190,7 +210,7 @@ def table(rows):
         "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for n, jit in keys:
-        for side in ("ours (bands, IMM)", "BlueSky MVP (truth)"):
+        for side in (*OURS.values(), "BlueSky MVP (truth)"):
             rs = [r for r in rows if r["n"] == n and r["jitter"] == jit and r["side"] == side]
             if not rs:
                 continue
@@ -214,6 +234,9 @@ def main(argv=None):
     ap.add_argument("--mvp-hdg", action="store_true", help="MVP heading-only (RMETHH HDG)")
     ap.add_argument("--side", choices=["both", "ours", "bluesky"], default="both")
     ap.add_argument("--out", help="append the JSON lines to this file too")
+    ap.add_argument(
+        "--ours", choices=sorted(OURS), default="shipped", help="our resolver (module docstring)"
+    )
     args = ap.parse_args(argv)
     seeds = parse_seeds(args.seeds)
     if args.side == "bluesky":  # inside the BlueSky venv: one JSON line per run
@@ -242,8 +265,8 @@ def main(argv=None):
         if args.side in ("both", "ours"):
             for seed in seeds:
                 t0 = time.perf_counter()
-                out = run_ours(n, seed, args.jitter)
-                out.update(n=n, seed=seed, jitter=args.jitter, side="ours (bands, IMM)")
+                out = run_ours(n, seed, args.jitter, args.ours)
+                out.update(n=n, seed=seed, jitter=args.jitter, side=OURS[args.ours])
                 out["wall_s"] = round(time.perf_counter() - t0, 1)
                 emit(out)
         if args.side in ("both", "bluesky") and args.bluesky_python:

@@ -1,14 +1,15 @@
-"""How far is the resolver from the best achievable? Rings of 8–16 aircraft: our ``bands``
+"""How far is the resolver from the best achievable? Rings of 8–16 aircraft: our resolver
 against a centralised, perfect-knowledge plan (:mod:`airspace_sim.avoidance.oracle`).
 
-    python docs/benchmarks/oracle_rings.py --sizes 8 12 16 --seeds 0-4
+    python docs/benchmarks/oracle_rings.py --sizes 8 12 16 --seeds 0-4 [--ours shipped|bands]
 
 The ring is :func:`bluesky_rings.ring_traffic` (the same as ``ring_scenario``: radius 20 km
 at these sizes, 230 m/s, 3°/s, r_safe 3000 m). The oracle's plan is flown in the World by
 controlled aircraft (``oracle.fly_in_world``: tracker ``truth``, no resolver) to check it:
 its LoS pairs must be 0 and its extra path is the World's ``extra_path_pct``. Ours: ``ring_scenario`` (IMM tracks
-from σ = 50 m, ``bands``, margin 10%), seeds as given, and the same with perfect tracks
-(``tracker = "truth"``). Prints JSON lines, then a Markdown table.
+from σ = 50 m) with ``--ours``' resolver (:func:`bluesky_rings.our_scenario`: ``shipped``, the
+default, ``scenarios/ring.toml``'s; ``bands`` at margin 10%), seeds as given, and the same
+with perfect tracks (``tracker = "truth"``). Prints JSON lines, then a Markdown table.
 """
 
 from __future__ import annotations
@@ -23,17 +24,16 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from bluesky_rings import R_SAFE, SPEED, parse_seeds, ring_traffic  # noqa: E402
+from bluesky_rings import R_SAFE, SPEED, our_scenario, parse_seeds, ring_traffic  # noqa: E402
 
 from airspace_sim.avoidance.oracle import best_plan, fly_in_world  # noqa: E402
 from airspace_sim.world import World  # noqa: E402
-from airspace_sim.world.benchmark import ring_scenario  # noqa: E402
 
 RATE = math.radians(3.0)
 
 
-def ours(n, seed, tracker):
-    m = World(ring_scenario(n, seed=seed, tracker=tracker), seed=seed).run()
+def ours(n, seed, tracker, which="shipped"):
+    m = World(our_scenario(n, seed, which, tracker=tracker), seed=seed).run()
     keys = ("los_pairs", "extra_path_pct", "arrival_delay_mean_s", "arrival_delay_max_s")
     return {k: m[k] for k in keys} | {"not_arrived": m["not_arrived"]}
 
@@ -49,6 +49,7 @@ def main(argv=None):
     ap.add_argument("--sizes", type=int, nargs="+", default=[8, 12, 16])
     ap.add_argument("--seeds", default="0-4")
     ap.add_argument("--orders", type=int, default=4, help="priority orders the oracle tries")
+    ap.add_argument("--ours", choices=["shipped", "bands"], default="shipped")
     args = ap.parse_args(argv)
     rows = []
     for n in args.sizes:
@@ -74,7 +75,8 @@ def main(argv=None):
         print(json.dumps(row), flush=True)
         for tracker in ("imm", "truth"):
             for seed in parse_seeds(args.seeds):
-                row = ours(n, seed, tracker) | {"n": n, "seed": seed, "side": f"bands ({tracker})"}
+                side = f"{args.ours} ({tracker})"
+                row = ours(n, seed, tracker, args.ours) | {"n": n, "seed": seed, "side": side}
                 rows.append(row)
                 print(json.dumps(row), flush=True)
     print()
