@@ -113,6 +113,9 @@ def _kernel(vo, r, v, valid, psi, radius, lookahead_s, w, wi, turn_s, step_s):  
     out = np.full((n_own, n_cand), np.inf)
     own_x = np.empty(n_s + 1)
     own_y = np.empty(n_s + 1)
+    # the ownship's arc left and right, shared by every candidate while it still turns
+    arc_x = np.empty((2, n_s + 1))
+    arc_y = np.empty((2, n_s + 1))
     # the intruders' sampled positions relative to the ownship's start, once per ownship
     int_x = np.empty((n_int, n_s + 1))
     int_y = np.empty((n_int, n_s + 1))
@@ -133,6 +136,16 @@ def _kernel(vo, r, v, valid, psi, radius, lookahead_s, w, wi, turn_s, step_s):  
         for k in range(n_int):
             if valid[n, k] and wi[n, k] != 0.0:
                 int_turn_max = max(int_turn_max, turn_s[n, k])
+        arc_end = 0
+        if turns:
+            # a sample at t ≤ τ is the same point of the arc for every τ (t − min(t, τ) = 0)
+            arc_end = _samples_until(max(own_turn_max, int_turn_max), step_s, n_s)
+            for side in range(2):
+                rate = w[n] if side == 0 else -w[n]
+                for s in range(arc_end + 1):
+                    arc_x[side, s], arc_y[side, s] = _arc_then_straight(
+                        speed, h0, rate, own_turn_max, times[s]
+                    )
         for k in range(n_int):
             if not valid[n, k]:
                 continue
@@ -158,8 +171,12 @@ def _kernel(vo, r, v, valid, psi, radius, lookahead_s, w, wi, turn_s, step_s):  
             else:  # the heading change at once
                 rate, tau, h_start = 0.0, 0.0, h0 + p
             needed = _samples_until(max(tau, int_turn_max), step_s, n_s)
+            side = 0 if rate > 0 else 1
             for s in range(needed + 1):
-                own_x[s], own_y[s] = _arc_then_straight(speed, h_start, rate, tau, times[s])
+                if turns and times[s] <= tau:
+                    own_x[s], own_y[s] = arc_x[side, s], arc_y[side, s]
+                else:
+                    own_x[s], own_y[s] = _arc_then_straight(speed, h_start, rate, tau, times[s])
             own_x[n_s], own_y[n_s] = _arc_then_straight(speed, h_start, rate, tau, times[n_s])
             best = np.inf
             for k in range(n_int):
