@@ -136,10 +136,9 @@ def _kernel(vo, r, v, valid, psi, radius, lookahead_s, w, wi, turn_s, step_s):  
         for k in range(n_int):
             if valid[n, k] and wi[n, k] != 0.0:
                 int_turn_max = max(int_turn_max, turn_s[n, k])
-        arc_end = 0
         if turns:
             # a sample at t ≤ τ is the same point of the arc for every τ (t − min(t, τ) = 0)
-            arc_end = _samples_until(max(own_turn_max, int_turn_max), step_s, n_s)
+            arc_end = _samples_until(own_turn_max, step_s, n_s)
             for side in range(2):
                 rate = w[n] if side == 0 else -w[n]
                 for s in range(arc_end + 1):
@@ -163,7 +162,7 @@ def _kernel(vo, r, v, valid, psi, radius, lookahead_s, w, wi, turn_s, step_s):  
             int_y[k, n_s] = r[n, k, 1] + iy
         for c in range(n_cand):
             p = psi[n, c]
-            if np.isnan(p) and n_int > 0:
+            if np.isnan(p):
                 out[n, c] = np.nan
                 continue
             if turns:
