@@ -151,8 +151,8 @@ def _kernel(vo, r, v, valid, psi, radius, lookahead_s, w, wi, turn_s, step_s):  
             vix = v[n, k, 0] + vo[n, 0]
             viy = v[n, k, 1] + vo[n, 1]
             si, hi = np.hypot(vix, viy), np.arctan2(viy, vix)
-            own_k = turn_s[n, k] if wi[n, k] != 0.0 else 0.0
-            needed = _samples_until(max(own_turn_max, own_k), step_s, n_s)
+            turn_k = turn_s[n, k] if wi[n, k] != 0.0 else 0.0
+            needed = _samples_until(max(own_turn_max, turn_k), step_s, n_s)
             for s in range(needed + 1):
                 ix, iy = _arc_then_straight(si, hi, wi[n, k], turn_s[n, k], times[s])
                 int_x[k, s] = r[n, k, 0] + ix
