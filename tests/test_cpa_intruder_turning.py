@@ -31,16 +31,25 @@ def _scene(seed, n=12, k=5, c=13):
     return vo, r, vi - vo[:, None], valid, cand, omega
 
 
-def _oracle(vo, r, v, valid, cand, omega, turn_s, lookahead):
+def _oracle(vo, r, v, valid, cand, omega, turn_s, lookahead, rate=None):
+    """Brute force; ``turn_s`` scalar or (n, k) s, ``rate`` (n,) rad/s the ownships' (default
+    RATE; not finite: the heading change at once)."""
     t = np.linspace(0.0, lookahead, int(lookahead * 100) + 1)
+    turn_s = np.broadcast_to(turn_s, valid.shape)
+    rate = np.full(vo.shape[0], RATE) if rate is None else rate
     out = np.full(cand.shape, np.inf)
     for i in range(cand.shape[0]):
         speed, h0 = np.hypot(*vo[i]), math.atan2(vo[i, 1], vo[i, 0])
         for j, psi in enumerate(cand[i]):
-            ox, oy = arc_path(speed, h0, math.copysign(RATE, psi), abs(psi) / RATE, t)
+            if np.isfinite(rate[i]):
+                ox, oy = arc_path(speed, h0, math.copysign(rate[i], psi), abs(psi) / rate[i], t)
+            else:
+                ox, oy = arc_path(speed, h0 + psi, 0.0, 0.0, t)
             for q in np.flatnonzero(valid[i]):
                 vi = v[i, q] + vo[i]
-                ix, iy = arc_path(np.hypot(*vi), math.atan2(vi[1], vi[0]), omega[i, q], turn_s, t)
+                ix, iy = arc_path(
+                    np.hypot(*vi), math.atan2(vi[1], vi[0]), omega[i, q], turn_s[i, q], t
+                )
                 d = np.hypot(r[i, q, 0] + ix - ox, r[i, q, 1] + iy - oy).min() / RADIUS
                 out[i, j] = min(out[i, j], d)
     return out
@@ -53,6 +62,21 @@ def test_matches_the_sampled_oracle(seed, turn_s):
     got = cpa_min_ratio_intruder_turning(vo, r, v, valid, cand, RADIUS, 120.0, rate, omega, turn_s)
     want = _oracle(vo, r, v, valid, cand, omega, turn_s, 120.0)
     # one-second chords of 3°/s arcs at up to 260 m/s depart from them by under 2 m
+    np.testing.assert_allclose(got, want, atol=3.0 / RADIUS, rtol=0)
+
+
+def test_mixed_turn_durations_and_rates_match_the_sampled_oracle():
+    """Turns of different lengths in one row (0, short, longer than any candidate's own turn,
+    beyond the look-ahead), intruders straight among them, and ownships that take the heading
+    change at once: the kernel evaluates both paths only up to the end of both turns and at
+    the look-ahead, which must not change the minimum."""
+    vo, r, v, valid, cand, omega = _scene(7, n=10, k=6, c=15)
+    rng = np.random.default_rng(7)
+    turn_s = rng.choice([0.0, 4.0, 45.0, 300.0], size=valid.shape)
+    omega[:, 0] = 0.0
+    rate = np.where(np.arange(vo.shape[0]) % 3 == 0, np.inf, RATE)
+    got = cpa_min_ratio_intruder_turning(vo, r, v, valid, cand, RADIUS, 90.0, rate, omega, turn_s)
+    want = _oracle(vo, r, v, valid, cand, omega, turn_s, 90.0, rate)
     np.testing.assert_allclose(got, want, atol=3.0 / RADIUS, rtol=0)
 
 
