@@ -12,32 +12,24 @@ H hold, A on its autopilot: direct or turning toward it), R its distance from th
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from resolver_candidates import scenario  # noqa: E402
+from ring_hold_trace import ring_arguments, ring_world  # noqa: E402
 
 from airspace_sim.geometry import wrap_angle  # noqa: E402
-from airspace_sim.world import World  # noqa: E402
 
 DIRECT, CONFLICT, HOLD, GONE = 0, 1, 2, 3
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("n", type=int)
-    ap.add_argument("seed", type=int)
-    ap.add_argument("kind")
-    ap.add_argument("--policy", nargs="*", default=[], metavar="KEY=VALUE")
+    ap = ring_arguments(__doc__)
     ap.add_argument("--show", type=int, default=12, help="late aircraft printed (default 12)")
     args = ap.parse_args(argv)
-    sc, _ = scenario(f"ring:{args.n}:{args.seed}", args.kind, args.policy)
-    w = World(sc, seed=args.seed)
-    dest = -w.positions.copy()  # a ring's aircraft fly to the opposite point
+    sc, w, dest = ring_world(args)
     steps = int(round(sc.duration / sc.dt))
     state = np.full((steps, w.n), GONE, dtype=np.int8)
     radius, error, to_go = (np.zeros((steps, w.n)) for _ in range(3))

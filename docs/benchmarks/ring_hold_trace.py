@@ -23,16 +23,27 @@ from airspace_sim.geometry import wrap_angle  # noqa: E402
 from airspace_sim.world import World  # noqa: E402
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def ring_arguments(doc: str) -> argparse.ArgumentParser:
+    """The arguments of a ring trace: ring size, seed, resolver kind, ``--policy`` knobs."""
+    ap = argparse.ArgumentParser(description=doc.split("\n\n")[0])
     ap.add_argument("n", type=int)
     ap.add_argument("seed", type=int)
     ap.add_argument("kind")
     ap.add_argument("--policy", nargs="*", default=[], metavar="KEY=VALUE")
-    args = ap.parse_args(argv)
+    return ap
+
+
+def ring_world(args):
+    """``(scenario, world, destinations (N, 2) m)`` of the ring ``args`` name (a ring's
+    aircraft fly to the opposite point)."""
     sc, _ = scenario(f"ring:{args.n}:{args.seed}", args.kind, args.policy)
     w = World(sc, seed=args.seed)
-    dest = -w.positions.copy()  # a ring's aircraft fly to the opposite point
+    return sc, w, -w.positions.copy()
+
+
+def main(argv=None):
+    args = ring_arguments(__doc__).parse_args(argv)
+    sc, w, dest = ring_world(args)
     for s in range(int(round(sc.duration / sc.dt))):
         w.step()
         a = w.active
