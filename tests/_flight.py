@@ -2,7 +2,8 @@
 
 import numpy as np
 
-#: the shipped knobs of bands-flown (K1: scenarios/ring.toml; dense_random.toml adds intents)
+#: the boxed-fallback knobs (K1) that both shipped scenarios give bands-flown-intent
+#: (scenarios/ring.toml, scenarios/dense_random.toml; they add priority_by_crossing)
 K1 = dict(
     fresh_sides_only=True,
     switch_below=1.0,
