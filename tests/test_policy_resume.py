@@ -239,3 +239,110 @@ def test_resume_turn_knobs_defaults_and_validation():
         load("ring", ["resolver.resume_turn_s=-1.0"])
     msg = str(info.value)
     assert "\n" not in msg and "resolver.resume_turn_s" in msg and "-1" in msg
+
+
+def _off_course_policy(n, degrees):
+    sc = load(
+        "dense_random",
+        [
+            'resolver.resume_rule="no-worse"',
+            "resolver.lookahead=120.0",
+            f"resolver.margin={MARGIN}",
+            f"resolver.resume_off_course_deg={degrees}",
+        ],
+    )
+    return AvoidancePolicy(sc, 1.0, np.ones(n, bool), np.ones(n, bool))
+
+
+def test_off_course_an_ownship_turns_back_past_a_neighbour_no_worse_holds_it_for():
+    # Ownship east at 200 m/s, its autopilot's heading `off` degrees to the left. The
+    # intruder 5 km ahead-left at 6 km lateral, flying east at 190 m/s: a slow overtaking
+    # whose closest distance (~6 km, inside R1 = 7.8 km, outside R0 = 3.3 km) a 3 deg left
+    # turn lowers. "no-worse" holds; waived from 30 deg off course on, it turns back.
+    r = np.array([[5000.0, 6000.0]])
+    vo = np.array([200.0, 0.0])
+    v = np.array([[-10.0, 0.0]])
+    turn = np.radians(3.0)
+    held, turned = (_brute_min_distance(vo, r, v, f * turn)[0] for f in (0.0, 1.0))
+    assert R0 < turned < held < R1
+    enc = Encounters(np.array([0]), np.array([[0]]), r[None], v[None], np.array([[True]]))
+    velocities, mx, fly = np.array([vo, vo]), np.full(2, turn), np.full(1, turn)
+    for off, want in ((20.0, 0.0), (40.0, 1.0), (-40.0, 1.0)):
+        desired = np.array([np.radians(off)])
+        got = _off_course_policy(2, 30.0)._resume_fraction(enc, velocities, fly, mx, desired)
+        assert got.tolist() == [want], off
+    plain = _policy("no-worse")._resume_fraction(enc, velocities, fly, mx, np.array([0.7]))
+    assert plain.tolist() == [0.0]
+    # an intruder the turn would bring inside R0 still holds an ownship however far off
+    # course: the waiver keeps the no-conflict test
+    close = Encounters(
+        np.array([0]),
+        np.array([[0]]),
+        np.array([[[1000.0, 3500.0]]]),
+        v[None],
+        np.ones((1, 1), bool),
+    )
+    near = _brute_min_distance(vo, close.rel_position[0], v, turn)[0]
+    assert near < R0 < _brute_min_distance(vo, close.rel_position[0], v, 0.0)[0]
+    got = _off_course_policy(2, 30.0)._resume_fraction(
+        close, velocities, fly, mx, np.array([np.radians(90.0)])
+    )
+    assert got[0] < 1.0
+
+
+def test_off_course_waiver_by_brute_force():
+    # random encounters and autopilot headings: an ownship at least 30 deg off course passes
+    # a fraction on the no-conflict test alone, the others on "no-worse"'s full test
+    rng = np.random.default_rng(11)
+    n, k = 300, 3
+    vo = rng.uniform(-250, 250, (n, 2))
+    r = rng.uniform(-12000, 12000, (n, k, 2))
+    v = rng.uniform(-400, 400, (n, k, 2))
+    valid = rng.random((n, k)) < 0.8
+    turn = rng.uniform(-0.06, 0.06, n)
+    desired = np.arctan2(vo[:, 1], vo[:, 0]) + rng.uniform(-np.pi, np.pi, n)
+    off = np.abs(np.angle(np.exp(1j * (desired - np.arctan2(vo[:, 1], vo[:, 0]))))) >= np.radians(
+        30
+    )
+    pol = _off_course_policy(n, 30.0)
+    enc = Encounters(np.arange(n), np.zeros((n, k), np.int64), r, v, valid)
+    got = pol._resume_fraction(enc, vo, turn, np.full(n, np.radians(3.0)), desired)
+    checked = waived = 0
+    for i in range(n):
+        each = np.array(
+            [
+                _brute_min_distance(vo[i], r[i][valid[i]], v[i][valid[i]], f * turn[i])
+                for f in RESUME_FRACTIONS
+            ]
+        )
+        if not each.size:
+            continue
+        ds = each.min(axis=1)
+        capped = np.minimum(each, R1)
+        rel = abs(capped[:-1] / capped[-1:] - 1)
+        near = [abs(ds / x - 1).min() < 1e-3 for x in (R0, R1)]
+        near += [(abs(each / R1 - 1) < 1e-3).any(), bool(((rel > 0) & (rel < 1e-5)).any())]
+        if any(near):
+            continue  # sampling cannot decide a tie at a threshold
+        ok = (ds >= R0) & ((capped >= capped[-1:]).all(axis=1) | off[i])
+        ok[-1] = True
+        assert got[i] == RESUME_FRACTIONS[np.argmax(ok)], i
+        checked += 1
+        plain = (ds >= R0) & (capped >= capped[-1:]).all(axis=1)
+        plain[-1] = True
+        waived += int(np.argmax(plain) != np.argmax(ok))
+    assert checked > n // 2
+    assert waived > 0  # the waiver changed some decisions
+
+
+def test_resume_off_course_validation():
+    from airspace_sim.scenarios.schema import ResolverSpec
+
+    assert ResolverSpec().resume_off_course_deg is None
+    # another rule ignores it, as the other rules' knobs (resume_turn_s, ...)
+    sc = load("ring", ['resolver.resume_rule="hold"', "resolver.resume_off_course_deg=30.0"])
+    assert World(sc, seed=0).policy.resume_off_course == pytest.approx(np.radians(30.0))
+    with pytest.raises(UserError) as info:
+        load("ring", ["resolver.resume_off_course_deg=200.0"])
+    msg = str(info.value)
+    assert "\n" not in msg and "resolver.resume_off_course_deg" in msg and "200" in msg

@@ -68,3 +68,17 @@ def test_shipped_ring_keeps_separation_on_a_shorter_path_than_holding(seed):
     ).run()
     assert shipped["los_events"] == 0 and shipped["nmac_events"] == 0, shipped
     assert shipped["extra_path_pct"] < held["extra_path_pct"], (shipped, held)
+
+
+@pytest.mark.slow
+def test_shipped_ring_off_course_waiver_gets_the_fleet_home():
+    """scenarios/ring.toml waives the no-worse comparison from 30° off course: on the file's
+    seed every aircraft is home in its 420 s, without a loss, where without the waiver (at
+    180° nobody is that far off) a dozen are still flying, holding headings far off course."""
+    from airspace_sim.scenarios import load
+
+    shipped = World(load("ring"), seed=0).run()
+    never = World(load("ring", ["resolver.resume_off_course_deg=180.0"]), seed=0).run()
+    assert shipped["los_events"] == 0 and shipped["nmac_events"] == 0, shipped
+    assert shipped["not_arrived"] == 0 and never["not_arrived"] >= 5, (shipped, never)
+    assert shipped["extra_path_pct"] < never["extra_path_pct"], (shipped, never)

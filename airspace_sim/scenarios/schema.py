@@ -97,6 +97,11 @@ class ResolverSpec:
     #: "no-worse-turns": true lets a turn back bring an intruder's turned path closer as
     #: long as it stays outside r_safe·(1 + margin) (false: outside the resume radius)
     resume_turn_clear: bool = False
+    #: "no-worse" / "no-worse-turns" (other rules ignore it): degrees off its autopilot's
+    #: heading from which an ownship's turn back only has to clear r_safe·(1 + margin), the
+    #: per-intruder comparison with holding waived (holding far off course costs more than
+    #: the wide clearance buys; docs/resolvers.md, fifteenth part); unset: never waived
+    resume_off_course_deg: float | None = None
     #: "bands-probabilistic": seconds over which each intruder mode's prediction is judged
     #: (unset: the look-ahead), at this many evenly spaced times
     probability_horizon_s: float | None = None

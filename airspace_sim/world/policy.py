@@ -17,7 +17,7 @@ reaches into it:
 Policy knobs live in ``scenario.resolver`` (``search_deg``, ``turn_preference``,
 ``confirm_s``, ``resume_margin``, ``resume_decay_s``, ``resume_margin_floor``,
 ``resume_rule``, ``resume_turn_s``,
-``resume_turn_clear``, ``side_memory_s``,
+``resume_turn_clear``, ``resume_off_course_deg``, ``side_memory_s``,
 ``probability_horizon_s``, ``probability_samples``); why they have the values they have is
 in ``docs/tuning.md``.
 """
@@ -114,6 +114,9 @@ class AvoidancePolicy:
         self.resume_rule = spec.resume_rule
         self.resume_turn_s = float(spec.resume_turn_s)
         self.resume_turn_clear = bool(spec.resume_turn_clear)
+        off = spec.resume_off_course_deg
+        #: rad off the autopilot's heading from which the no-worse comparison is waived
+        self.resume_off_course = None if off is None else math.radians(float(off))
         self.confirm_steps = math.ceil(float(spec.confirm_s) / dt - 1e-9)
         self.preference = spec.turn_preference
         self.memory_steps = max(math.ceil(float(spec.side_memory_s) / dt - 1e-9), 1)
@@ -149,12 +152,13 @@ class AvoidancePolicy:
 
     def __setstate__(self, state):
         """Unpickle; a checkpoint from before ``held_heading``, ``resume_margin_floor``, speed
-        advice and ``intent_heading`` holds no held heading (NaN), a floor of 0, no speed
-        advice and no intent (NaN)."""
+        advice, ``intent_heading`` and ``resume_off_course`` holds no held heading (NaN), a
+        floor of 0, no speed advice, no intent (NaN) and no off-course waiver."""
         n = np.asarray(state["advice"]).size
         if "held_heading" not in state:
             state["held_heading"] = np.full(n, np.nan)
         state.setdefault("resume_margin_floor", 0.0)
+        state.setdefault("resume_off_course", None)
         if "intent_heading" not in state:
             state["intent_heading"] = np.full(n, np.nan)
             state["intent_age_s"] = np.zeros(n)
@@ -202,7 +206,9 @@ class AvoidancePolicy:
                         out[hold] = 0.0
                         follow[hold] = True
                     else:
-                        frac = self._resume_fraction(sub, velocities, turn, max_heading_change)
+                        frac = self._resume_fraction(
+                            sub, velocities, turn, max_heading_change, desired[sub.owners]
+                        )
                         part = frac < 1.0
                         cut = sub.owners[part]
                         out[cut] = np.where(frac[part] > 0.0, rate[cut] * frac[part], 0.0)
@@ -255,10 +261,11 @@ class AvoidancePolicy:
         )
         return np.asarray(clear, dtype=bool)
 
-    def _resume_fraction(self, enc: Encounters, velocities, turn, max_heading_change):
+    def _resume_fraction(self, enc: Encounters, velocities, turn, max_heading_change, desired=None):
         """(n_own,) fraction of the turn back ``turn`` (n_own,) rad, clipped to
         ``max_heading_change``, that enc's ownships fly under ``resume_rule`` (the largest
-        of :data:`RESUME_FRACTIONS` that passes; 0 holds the heading).
+        of :data:`RESUME_FRACTIONS` that passes; 0 holds the heading). ``desired`` (n_own,)
+        rad: their autopilots' headings (needed with ``resume_off_course_deg``).
 
         With R0 = r_safe·(1 + margin), R1 = r_safe·(1 + margin + extra) (``extra`` as in
         :meth:`_resume_clear`), ρ(ψ) the minimum CPA distance over the look-ahead divided by
@@ -278,6 +285,9 @@ class AvoidancePolicy:
           (:func:`~airspace_sim.avoidance.turn_paths.turned_path_min_ratio`): a neighbour
           that begins an avoidance turn now must not find the ownship closer than holding
           would have left it (capped at R1, or at R0 with ``resume_turn_clear``).
+
+        With ``resume_off_course_deg`` set, an ownship at least that far off its autopilot's
+        heading passes ψ under either "no-worse" rule on the no-conflict test alone.
         """
         vo = velocities[enc.owners]
         mx = max_heading_change[enc.owners]
@@ -318,6 +328,11 @@ class AvoidancePolicy:
                 cap = (base / wide)[:, None, None, None] if self.resume_turn_clear else 1.0
                 worse = paths < np.minimum(paths[..., -1:], cap - CLEAR_TOLERANCE)
                 ok &= ~worse.any(axis=(1, 2))
+            if self.resume_off_course is not None and self.resume_rule != "diverging":
+                # far off course, a turn back needs only to be conflict-free
+                heading = np.arctan2(vo[:, 1], vo[:, 0])
+                off = np.abs(wrap_angle(desired - heading)) >= self.resume_off_course
+                ok |= no_conflict & off[:, None]
         else:
             ratio = cpa_min_ratio(
                 vo, enc.rel_position, enc.rel_velocity, enc.valid, psi, radius, self.lookahead_s
