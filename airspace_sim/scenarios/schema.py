@@ -100,7 +100,8 @@ class ResolverSpec:
     #: "no-worse" / "no-worse-turns" (other rules ignore it): degrees off its autopilot's
     #: heading from which an ownship's turn back only has to clear r_safe·(1 + margin), the
     #: per-intruder comparison with holding waived (holding far off course costs more than
-    #: the wide clearance buys; docs/resolvers.md, fifteenth part); unset: never waived
+    #: the wide clearance buys; measured safe with "bands-flown-intent", not with "bands":
+    #: docs/resolvers.md, fifteenth part); unset: never waived
     resume_off_course_deg: float | None = None
     #: "bands-probabilistic": seconds over which each intruder mode's prediction is judged
     #: (unset: the look-ahead), at this many evenly spaced times
