@@ -184,8 +184,8 @@ class Recorder:
             out[int(enc.owners[a])] = row
         return out
 
-    def _fraction(self, enc, velocities, turn, max_heading_change):
-        frac = self._orig_fraction(enc, velocities, turn, max_heading_change)
+    def _fraction(self, enc, velocities, turn, max_heading_change, desired=None):
+        frac = self._orig_fraction(enc, velocities, turn, max_heading_change, desired)
         mx = max_heading_change[enc.owners]
         psi = np.clip(turn, -mx, mx) * frac
         pred = self._predictions(enc, velocities, psi)
