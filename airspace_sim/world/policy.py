@@ -329,6 +329,8 @@ class AvoidancePolicy:
                 worse = paths < np.minimum(paths[..., -1:], cap - CLEAR_TOLERANCE)
                 ok &= ~worse.any(axis=(1, 2))
             if self.resume_off_course is not None and self.resume_rule != "diverging":
+                if desired is None:
+                    raise ValueError("resume_off_course_deg needs the autopilots' headings")
                 # far off course, a turn back needs only to be conflict-free
                 heading = np.arctan2(vo[:, 1], vo[:, 0])
                 off = np.abs(wrap_angle(desired - heading)) >= self.resume_off_course
