@@ -31,6 +31,19 @@ def _policy(rule, n=2):
     return pol
 
 
+def _off_course_policy(n, degrees):
+    sc = load(
+        "dense_random",
+        [
+            'resolver.resume_rule="no-worse"',
+            "resolver.lookahead=120.0",
+            f"resolver.margin={MARGIN}",
+            f"resolver.resume_off_course_deg={degrees}",
+        ],
+    )
+    return AvoidancePolicy(sc, 1.0, np.ones(n, bool), np.ones(n, bool))
+
+
 def _brute_min_distance(vo, r, v, psi):
     """(K,) minimum distance over t in [0, T] sampled every 0.01 s, the ownship turned by psi
     rad and then straight, the intruders straight (r, v: (K, 2) relative at psi = 0)."""
@@ -64,8 +77,13 @@ def test_a_passed_diverging_intruder_inside_the_resume_radius_blocks_only_hold()
     assert _policy("no-worse")._resume_fraction(enc, velocities, fly, mx).tolist() == [1.0]
 
 
-@pytest.mark.parametrize("rule", ["partial", "no-worse", "diverging"])
-def test_the_fraction_flown_is_the_largest_that_passes_by_brute_force(rule):
+@pytest.mark.parametrize(
+    "rule, off_course_deg",
+    [("partial", None), ("no-worse", None), ("diverging", None), ("no-worse", 30.0)],
+)
+def test_the_fraction_flown_is_the_largest_that_passes_by_brute_force(rule, off_course_deg):
+    # with off_course_deg, random autopilot headings: an ownship at least that far off course
+    # passes a fraction on the no-conflict test alone, the others on "no-worse"'s full test
     rng = np.random.default_rng(5)
     n, k = 300, 3
     vo = rng.uniform(-250, 250, (n, 2))
@@ -73,10 +91,17 @@ def test_the_fraction_flown_is_the_largest_that_passes_by_brute_force(rule):
     v = rng.uniform(-400, 400, (n, k, 2))
     valid = rng.random((n, k)) < 0.8
     turn = rng.uniform(-0.06, 0.06, n)
-    pol = _policy(rule, n)
+    heading = np.arctan2(vo[:, 1], vo[:, 0])
+    desired = heading + rng.uniform(-np.pi, np.pi, n)
+    off = np.zeros(n, bool)
+    if off_course_deg is None:
+        pol = _policy(rule, n)
+    else:
+        pol = _off_course_policy(n, off_course_deg)
+        off = np.abs(np.angle(np.exp(1j * (desired - heading)))) >= np.radians(off_course_deg)
     enc = Encounters(np.arange(n), np.zeros((n, k), np.int64), r, v, valid)
-    got = pol._resume_fraction(enc, vo, turn, np.full(n, np.radians(3.0)))
-    checked = 0
+    got = pol._resume_fraction(enc, vo, turn, np.full(n, np.radians(3.0)), desired)
+    checked = waived = 0
     for i in range(n):
         # (fractions, valid intruders) minimum distances, m
         each = np.array(
@@ -106,7 +131,11 @@ def test_the_fraction_flown_is_the_largest_that_passes_by_brute_force(rule):
         if rule == "partial":
             ok = ds >= R1
         elif rule == "no-worse":
-            ok = (ds >= R0) & (capped >= capped[-1:]).all(axis=1)
+            plain = (ds >= R0) & (capped >= capped[-1:]).all(axis=1)
+            ok = plain | ((ds >= R0) & off[i])
+            plain[-1] = True
+            ok[-1] = True
+            waived += int(np.argmax(plain) != np.argmax(ok))
         else:
             ok = (ds >= R0) & ((each >= R1) | (each >= now)).all(axis=1)
         ok[-1] = True
@@ -114,6 +143,8 @@ def test_the_fraction_flown_is_the_largest_that_passes_by_brute_force(rule):
         checked += 1
     assert checked > n // 2
     assert 0 < np.count_nonzero((got > 0) & (got < 1))  # partial turns happen
+    if off_course_deg is not None:
+        assert waived > 0  # the waiver changed some decisions
 
 
 def test_no_worse_turns_back_sooner_on_an_overtaking_and_keeps_r_safe():
@@ -241,19 +272,6 @@ def test_resume_turn_knobs_defaults_and_validation():
     assert "\n" not in msg and "resolver.resume_turn_s" in msg and "-1" in msg
 
 
-def _off_course_policy(n, degrees):
-    sc = load(
-        "dense_random",
-        [
-            'resolver.resume_rule="no-worse"',
-            "resolver.lookahead=120.0",
-            f"resolver.margin={MARGIN}",
-            f"resolver.resume_off_course_deg={degrees}",
-        ],
-    )
-    return AvoidancePolicy(sc, 1.0, np.ones(n, bool), np.ones(n, bool))
-
-
 def test_off_course_an_ownship_turns_back_past_a_neighbour_no_worse_holds_it_for():
     # Ownship east at 200 m/s, its autopilot's heading `off` degrees to the left. The
     # intruder 5 km ahead-left at 6 km lateral, flying east at 190 m/s: a slow overtaking
@@ -288,51 +306,6 @@ def test_off_course_an_ownship_turns_back_past_a_neighbour_no_worse_holds_it_for
         close, velocities, fly, mx, np.array([np.radians(90.0)])
     )
     assert got[0] < 1.0
-
-
-def test_off_course_waiver_by_brute_force():
-    # random encounters and autopilot headings: an ownship at least 30 deg off course passes
-    # a fraction on the no-conflict test alone, the others on "no-worse"'s full test
-    rng = np.random.default_rng(11)
-    n, k = 300, 3
-    vo = rng.uniform(-250, 250, (n, 2))
-    r = rng.uniform(-12000, 12000, (n, k, 2))
-    v = rng.uniform(-400, 400, (n, k, 2))
-    valid = rng.random((n, k)) < 0.8
-    turn = rng.uniform(-0.06, 0.06, n)
-    desired = np.arctan2(vo[:, 1], vo[:, 0]) + rng.uniform(-np.pi, np.pi, n)
-    off = np.abs(np.angle(np.exp(1j * (desired - np.arctan2(vo[:, 1], vo[:, 0]))))) >= np.radians(
-        30
-    )
-    pol = _off_course_policy(n, 30.0)
-    enc = Encounters(np.arange(n), np.zeros((n, k), np.int64), r, v, valid)
-    got = pol._resume_fraction(enc, vo, turn, np.full(n, np.radians(3.0)), desired)
-    checked = waived = 0
-    for i in range(n):
-        each = np.array(
-            [
-                _brute_min_distance(vo[i], r[i][valid[i]], v[i][valid[i]], f * turn[i])
-                for f in RESUME_FRACTIONS
-            ]
-        )
-        if not each.size:
-            continue
-        ds = each.min(axis=1)
-        capped = np.minimum(each, R1)
-        rel = abs(capped[:-1] / capped[-1:] - 1)
-        near = [abs(ds / x - 1).min() < 1e-3 for x in (R0, R1)]
-        near += [(abs(each / R1 - 1) < 1e-3).any(), bool(((rel > 0) & (rel < 1e-5)).any())]
-        if any(near):
-            continue  # sampling cannot decide a tie at a threshold
-        ok = (ds >= R0) & ((capped >= capped[-1:]).all(axis=1) | off[i])
-        ok[-1] = True
-        assert got[i] == RESUME_FRACTIONS[np.argmax(ok)], i
-        checked += 1
-        plain = (ds >= R0) & (capped >= capped[-1:]).all(axis=1)
-        plain[-1] = True
-        waived += int(np.argmax(plain) != np.argmax(ok))
-    assert checked > n // 2
-    assert waived > 0  # the waiver changed some decisions
 
 
 def test_resume_off_course_validation():
