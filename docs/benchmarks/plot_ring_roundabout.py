@@ -8,10 +8,10 @@ shipped ring resolver with and without its off-course waiver (``resume_off_cours
 
 Both rows fly ``scenarios/ring.toml``'s whole ``[resolver]`` on :func:`ring_scenario`'s ring
 (IMM tracks from σ = 50 m); the upper row with the waiver off (180°: no heading is that far off
-course), left out with ``--shipped-only``. Arrows: orange holds or part-resumes (the CDA policy's ``following`` while clear), red
-in conflict, green on its route; grey, the last 60 s of each track; dashed, the ring of
-destinations; in blue the aircraft given by ``--highlight`` (their last 90 s, and a dotted line
-to their destination). Positions in km.
+course), left out with ``--shipped-only``. Arrows: orange holds or part-resumes (the CDA
+policy's ``following`` while clear), red in conflict, green on its route; grey, the last 90 s
+of each track; dashed, the ring of destinations; in blue the aircraft given by
+``--highlight``, with a dotted line to their destination. Positions in km.
 """
 
 from __future__ import annotations
@@ -31,8 +31,9 @@ from airspace_sim.world.benchmark import ring_scenario  # noqa: E402
 
 
 def snapshots(n, seed, times, off_course_deg):
-    """Destinations (N, 2) m (a ring's aircraft fly to the opposite point) and [(t s, positions (N, 2) m, velocities (N, 2) m/s, active, conflict, following,
-    trail (≤ 90, N, 2) m)] of the ring at each of ``times``."""
+    """Destinations (N, 2) m (a ring's aircraft fly to the opposite point) and, at each of
+    ``times``, (t s, positions (N, 2) m, velocities (N, 2) m/s, active, conflict, following,
+    trail (≤ 90, N, 2) m)."""
     sc = ring_scenario(n)
     resolver = dataclasses.replace(load("ring").resolver, resume_off_course_deg=off_course_deg)
     w = World(dataclasses.replace(sc, resolver=resolver), seed=seed)
