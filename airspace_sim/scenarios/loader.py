@@ -229,6 +229,9 @@ RANGES: dict[str, Callable[[Any], str | None]] = {
     "ResolverSpec.resume_off_course_deg": _check(
         "a number of degrees in [0, 180]", lambda v: 0 <= v <= 180
     ),
+    "ResolverSpec.route_side_off_course_deg": _check(
+        "a number of degrees in [0, 180]", lambda v: 0 <= v <= 180
+    ),
     "ResolverSpec.probability_horizon_s": _range(0, MAX_LOOKAHEAD_S, lo_open=True, unit="s"),
     "ResolverSpec.probability_samples": _range(1, MAX_PROBABILITY_SAMPLES, integer=True),
     "ResolverSpec.side_memory_s": _range(0, MAX_TIME_S, unit="s"),

@@ -103,6 +103,11 @@ class ResolverSpec:
     #: the wide clearance buys; measured safe with "bands-flown-intent", not with "bands":
     #: docs/resolvers.md, fifteenth part); unset: never waived
     resume_off_course_deg: float | None = None
+    #: degrees off its autopilot's heading from which an ownship in conflict turns to the
+    #: side of its route (the first clear heading on that side) instead of its committed
+    #: side, when that side has a clear heading (with "right" or "nearest" and a resolver
+    #: that reports its band; docs/resolvers.md, sixteenth part); unset: never
+    route_side_off_course_deg: float | None = None
     #: "bands-probabilistic": seconds over which each intruder mode's prediction is judged
     #: (unset: the look-ahead), at this many evenly spaced times
     probability_horizon_s: float | None = None

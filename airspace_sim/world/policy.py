@@ -17,7 +17,8 @@ reaches into it:
 Policy knobs live in ``scenario.resolver`` (``search_deg``, ``turn_preference``,
 ``confirm_s``, ``resume_margin``, ``resume_decay_s``, ``resume_margin_floor``,
 ``resume_rule``, ``resume_turn_s``,
-``resume_turn_clear``, ``resume_off_course_deg``, ``side_memory_s``,
+``resume_turn_clear``, ``resume_off_course_deg``, ``route_side_off_course_deg``,
+``side_memory_s``,
 ``probability_horizon_s``, ``probability_samples``); why they have the values they have is
 in ``docs/tuning.md``.
 """
@@ -73,6 +74,8 @@ class AvoidancePolicy:
     off_route_s : (N,) s since the aircraft last flew its autopilot without a pending turn
         back.
     following : (N,) bool, the aircraft flew the policy (advice or hold) in the last step.
+    desired_heading : (N,) rad, the autopilots' desired headings given to the last
+        :meth:`override` (NaN: none), read by the next detection's route side.
     held_heading : (N,) rad, the absolute heading advised at the last detection to an
         ownship in conflict (current heading + its chosen heading change), NaN elsewhere;
         given back to resolvers with ``uses_held_heading``.
@@ -117,6 +120,10 @@ class AvoidancePolicy:
         off = spec.resume_off_course_deg
         #: rad off the autopilot's heading from which the no-worse comparison is waived
         self.resume_off_course = None if off is None else math.radians(float(off))
+        off = spec.route_side_off_course_deg
+        #: rad off the autopilot's heading from which an ownship in conflict turns to the
+        #: side of its route
+        self.route_side_off_course = None if off is None else math.radians(float(off))
         self.confirm_steps = math.ceil(float(spec.confirm_s) / dt - 1e-9)
         self.preference = spec.turn_preference
         self.memory_steps = max(math.ceil(float(spec.side_memory_s) / dt - 1e-9), 1)
@@ -138,6 +145,7 @@ class AvoidancePolicy:
         self.off_route_s = np.zeros(n)
         self.following = np.zeros(n, dtype=bool)
         self.held_heading = np.full(n, np.nan)
+        self.desired_heading = np.full(n, np.nan)
         self.intent_heading = np.full(n, np.nan)
         self.intent_age_s = np.zeros(n)
         self.speed_target = np.full(n, np.nan)
@@ -152,13 +160,17 @@ class AvoidancePolicy:
 
     def __setstate__(self, state):
         """Unpickle; a checkpoint from before ``held_heading``, ``resume_margin_floor``, speed
-        advice, ``intent_heading`` and ``resume_off_course`` holds no held heading (NaN), a
-        floor of 0, no speed advice, no intent (NaN) and no off-course waiver."""
+        advice, ``intent_heading``, ``resume_off_course`` and ``route_side_off_course``
+        holds no held heading (NaN), a floor of 0, no speed advice, no intent (NaN), no
+        off-course waiver and no route side (nor the autopilots' headings it reads)."""
         n = np.asarray(state["advice"]).size
         if "held_heading" not in state:
             state["held_heading"] = np.full(n, np.nan)
         state.setdefault("resume_margin_floor", 0.0)
         state.setdefault("resume_off_course", None)
+        state.setdefault("route_side_off_course", None)
+        if "desired_heading" not in state:
+            state["desired_heading"] = np.full(n, np.nan)
         if "intent_heading" not in state:
             state["intent_heading"] = np.full(n, np.nan)
             state["intent_age_s"] = np.zeros(n)
@@ -177,9 +189,10 @@ class AvoidancePolicy:
         rad per step; avoid : (N,) bool, who flies the advice this step (default the
         ``avoid`` given at construction; the world adds RL agents that leave this step to
         the built-in pilot). Returns the new (N,) rad/s. Updates ``following`` and
-        ``off_route_s``.
+        ``off_route_s`` and ``desired_heading``.
         """
         n = rate.size
+        self.desired_heading = np.array(desired, dtype=float)
         follow = np.zeros(n, dtype=bool)
         resuming = np.zeros(n, dtype=bool)
         out = rate
@@ -419,6 +432,7 @@ class AvoidancePolicy:
                     np.asarray(out.candidates),
                     np.asarray(out.first_clear),
                     None if out.best_blocked is None else np.asarray(out.best_blocked),
+                    self._route_side(enc.owners, heading),
                 )
             advice[enc.owners] = np.clip(psi, -mx, mx)
             conflict[enc.owners] = c
@@ -460,7 +474,17 @@ class AvoidancePolicy:
             enc, velocities[enc.owners], clear_radius, self.lookahead_s, 1.0 - CLEAR_TOLERANCE
         )
 
-    def _commit(self, psi, conflict, side, cand, first_clear, best_blocked=None):
+    def _route_side(self, owners, heading):
+        """(n_own,) the side of their routes (−1 right, +1 left) for ``owners`` (n_own,) int
+        at ``heading`` (n_own,) rad at least ``route_side_off_course_deg`` off their
+        autopilots' headings, 0 for the others (and for all without the knob)."""
+        if self.route_side_off_course is None:
+            return np.zeros(owners.size)
+        error = wrap_angle(self.desired_heading[owners] - heading)
+        far = np.abs(error) >= self.route_side_off_course  # False where NaN: no autopilot
+        return np.where(far, np.where(error < 0.0, -1.0, 1.0), 0.0)
+
+    def _commit(self, psi, conflict, side, cand, first_clear, best_blocked=None, toward=None):
         """Heading changes and sides under the turn preference.
 
         ``psi`` (n,) resolver choices, rad; ``conflict`` (n,) bool; ``side`` (n,) committed
@@ -474,12 +498,17 @@ class AvoidancePolicy:
         has a clear heading. When it has none, a resolver that reports ``min_ratio`` gets
         the best heading on that side and the side is kept; otherwise the resolver's choice
         is used and the side follows it. Under ``"right"`` a left commitment is only the
-        fallback: back to the right as soon as a strictly right heading is clear. Returns
+        fallback: back to the right as soon as a strictly right heading is clear.
+        ``toward`` (n,) or None: an ownship in conflict with a nonzero entry (the side of its
+        route, :meth:`_route_side`) takes the first clear heading on that side and commits
+        to it, instead of all of the above, when that side has one. Returns
         ``(psi (n,), side (n,))``.
         """
         has_best = best_blocked is not None
         if not has_best:
             best_blocked = np.zeros((psi.size, 2), dtype=np.int64)
+        if toward is None:
+            toward = np.zeros(psi.size)
         return _commit_kernel(
             np.ascontiguousarray(psi, dtype=np.float64),
             np.ascontiguousarray(conflict, dtype=np.bool_),
@@ -489,6 +518,7 @@ class AvoidancePolicy:
             np.ascontiguousarray(best_blocked, dtype=np.int64),
             has_best,
             self.preference == "right",
+            np.ascontiguousarray(toward, dtype=np.float64),
         )
 
 
@@ -503,10 +533,11 @@ def _sign(x):
 
 
 @njit(cache=True)
-def _commit_kernel(psi, conflict, side, cand, first_clear, best_blocked, has_best, right):
+def _commit_kernel(psi, conflict, side, cand, first_clear, best_blocked, has_best, right, toward):
     """:meth:`AvoidancePolicy._commit` row by row (``right``: the ``"right"`` preference,
-    else ``"nearest"``; ``has_best``: ``best_blocked`` is given); the same selections as
-    :func:`commit_reference`, in one pass. Returns ``(psi (n,), side (n,))``."""
+    else ``"nearest"``; ``has_best``: ``best_blocked`` is given; ``toward`` (n,) the route
+    sides, 0: none); the same selections as :func:`commit_reference`, in one pass. Returns
+    ``(psi (n,), side (n,))``."""
     n = psi.size
     out_psi = np.empty(n)
     out_side = np.empty(n)
@@ -515,6 +546,11 @@ def _commit_kernel(psi, conflict, side, cand, first_clear, best_blocked, has_bes
         i_r, i_l, i_sr = first_clear[r, 0], first_clear[r, 1], first_clear[r, 2]
         has_r, pick_r = i_r >= 0, cand[r, max(i_r, 0)]
         has_l, pick_l = i_l >= 0, cand[r, max(i_l, 0)]
+        t = toward[r]
+        if c and t != 0.0 and (has_r if t < 0.0 else has_l):
+            out_psi[r] = pick_r if t < 0.0 else pick_l
+            out_side[r] = t
+            continue
         new_side = s
         fresh = c and s == 0.0
         if right:
@@ -544,7 +580,9 @@ def _commit_kernel(psi, conflict, side, cand, first_clear, best_blocked, has_bes
     return out_psi, out_side
 
 
-def commit_reference(preference, psi, conflict, side, cand, first_clear, best_blocked=None):
+def commit_reference(
+    preference, psi, conflict, side, cand, first_clear, best_blocked=None, toward=None
+):
     """The numpy statement of :meth:`AvoidancePolicy._commit` (``preference`` "right" or
     "nearest"), which :func:`_commit_kernel` computes row by row (tests compare them)."""
     rows = np.arange(psi.size)
@@ -575,7 +613,13 @@ def commit_reference(preference, psi, conflict, side, cand, first_clear, best_bl
         psi = np.where(kept & ~has_s & (best >= 0), cand[rows, np.maximum(best, 0)], psi)
     else:
         new_side = np.where(kept & ~has_s, np.sign(psi), new_side)
-    return psi, np.where(conflict, new_side, side)
+    new_side = np.where(conflict, new_side, side)
+    if toward is not None:
+        # far off course: the first clear heading toward the route, where there is one
+        route = conflict & np.where(toward < 0, has_r, np.where(toward > 0, has_l, False))
+        psi = np.where(route, np.where(toward < 0, pick_r, pick_l), psi)
+        new_side = np.where(route, toward, new_side)
+    return psi, new_side
 
 
 def mode_predictions(
