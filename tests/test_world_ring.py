@@ -82,3 +82,24 @@ def test_shipped_ring_off_course_waiver_gets_the_fleet_home():
     assert shipped["los_events"] == 0 and shipped["nmac_events"] == 0, shipped
     assert shipped["not_arrived"] == 0 and never["not_arrived"] >= 5, (shipped, never)
     assert shipped["extra_path_pct"] < never["extra_path_pct"], (shipped, never)
+
+
+@pytest.mark.slow
+def test_shipped_ring_route_side_gets_the_64_ring_home():
+    """The whole ``[resolver]`` of scenarios/ring.toml on the 64-ring (seed 4): an aircraft
+    that met the roundabout from inside and turned with it, far off course, was still flying
+    at 2R/v + 300 s; turning to the side of its route from 75° off course brings every
+    aircraft home, without a loss."""
+    import dataclasses
+
+    from airspace_sim.scenarios import load
+
+    shipped = load("ring").resolver
+    assert shipped.route_side_off_course_deg == 75.0
+    never = dataclasses.replace(shipped, route_side_off_course_deg=None)
+    runs = [
+        World(dataclasses.replace(ring_scenario(64, seed=4), resolver=r)).run()
+        for r in (shipped, never)
+    ]
+    assert runs[0]["los_events"] == 0 and runs[0]["nmac_events"] == 0, runs[0]
+    assert runs[0]["not_arrived"] == 0 and runs[1]["not_arrived"] >= 1, runs
