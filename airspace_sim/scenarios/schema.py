@@ -100,8 +100,9 @@ class ResolverSpec:
     #: "no-worse" / "no-worse-turns" (other rules ignore it): degrees off its autopilot's
     #: heading from which an ownship's turn back only has to clear r_safe·(1 + margin), the
     #: per-intruder comparison with holding waived (holding far off course costs more than
-    #: the wide clearance buys; measured safe with "bands-flown-intent", not with "bands":
-    #: docs/resolvers.md, fifteenth part); unset: never waived
+    #: the wide clearance buys; "bands" alone lost pairs with it, none with
+    #: route_side_off_course_deg as well: docs/resolvers.md, fifteenth and sixteenth
+    #: parts); unset: never waived
     resume_off_course_deg: float | None = None
     #: degrees off its autopilot's heading from which an ownship in conflict turns to the
     #: side of its route (the first clear heading on that side) instead of its committed
