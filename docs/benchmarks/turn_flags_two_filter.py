@@ -14,8 +14,9 @@ filter, the backward one and their combinations (turning seconds flagged with th
 
 - OR / AND of the two filters' flags (each: the probability of a turn at ≥ 0.5 °/s > 1/2);
 - two-filter: p_f·p_b/π against (1 − p_f)(1 − p_b)/(1 − π), the mode-probability form of
-  two-filter smoothing (exact for a stationary reversible chain when each filter's evidence
-  is independent given the mode), at a prior π and a threshold;
+  two-filter smoothing, at a prior π and a threshold (exact for a stationary reversible chain
+  when the backward filter stops before the current measurement and is predicted one step,
+  tests/test_turn_flags_two_filter.py; here both filters include it, so it counts twice);
 - mean: (p_f + p_b)/2 above a threshold.
 
 An experiment for docs/tracking.md, not a tracker: the thresholds and priors are chosen
