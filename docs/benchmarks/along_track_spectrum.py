@@ -13,12 +13,9 @@ truth's own smoothing, for comparison.
 
 from __future__ import annotations
 
-import argparse
-from pathlib import Path
-
 import numpy as np
 from scipy.signal import freqz, savgol_coeffs, welch
-from tune_tracker import split, truths_of
+from tune_tracker import split, split_arguments, truths_of
 
 from airspace_sim.tracking.evaluation import SMOOTH_S
 
@@ -29,9 +26,7 @@ BANDS_S = ((60, np.inf), (30, 60), (15, 30), (0, 15))
 
 
 def main(argv=None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("directory", type=Path)
-    ap.add_argument("--split", choices=("train", "test"), default="train")
+    ap = split_arguments(__doc__, period=False)
     a = ap.parse_args(argv)
     accels = []
     for tr in truths_of(split(a.directory, a.split), 1.0):

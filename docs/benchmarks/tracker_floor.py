@@ -21,12 +21,10 @@ preset's own ratio is printed too (``evaluation.evaluate``). Process CPU time is
 
 from __future__ import annotations
 
-import argparse
 import itertools
 import time
-from pathlib import Path
 
-from tune_tracker import SIGMA_BY_PERIOD, preset, split, truths_of
+from tune_tracker import SIGMA_BY_PERIOD, preset, split, split_arguments, truths_of
 
 from airspace_sim.tracking.evaluation import evaluate, known_motion_rmse
 
@@ -49,10 +47,7 @@ GRIDS = {
 
 
 def main(argv=None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("directory", type=Path)
-    ap.add_argument("--split", choices=("train", "test"), default="train")
-    ap.add_argument("--period", type=float, default=4.0)
+    ap = split_arguments(__doc__)
     ap.add_argument("--preset", action="append", default=[])
     a = ap.parse_args(argv)
     sigma = SIGMA_BY_PERIOD[a.period]

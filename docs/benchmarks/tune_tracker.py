@@ -37,6 +37,18 @@ from airspace_sim.tracking.evaluation import evaluate, resample
 SIGMA_BY_PERIOD = {1.0: 50.0, 4.0: 100.0}
 
 
+def split_arguments(doc: str, period: bool = True) -> argparse.ArgumentParser:
+    """The arguments of a script on the calibration samples: DIR, ``--split`` (the half
+    :func:`split` gives) and, with ``period``, ``--period`` (s, a key of
+    :data:`SIGMA_BY_PERIOD`)."""
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
+    ap.add_argument("directory", type=Path)
+    ap.add_argument("--split", choices=("train", "test"), default="train")
+    if period:
+        ap.add_argument("--period", type=float, default=4.0)
+    return ap
+
+
 def split(directory: Path, half: str) -> list[Path]:
     files = sorted(directory.glob("*.json.gz"))
     return files[0::2] if half == "train" else files[1::2]
@@ -90,10 +102,7 @@ def candidate(base, changes: dict):
 
 
 def main(argv=None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("directory", type=Path)
-    ap.add_argument("--split", choices=("train", "test"), default="train")
-    ap.add_argument("--period", type=float, default=4.0)
+    ap = split_arguments(__doc__)
     ap.add_argument("--preset", default="imm-ct")
     ap.add_argument("--candidate", action="append", default=[])
     a = ap.parse_args(argv)

@@ -25,16 +25,14 @@ on the training half.
 
 from __future__ import annotations
 
-import argparse
 import math
 import os
 import sys
-from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from tune_tracker import SIGMA_BY_PERIOD, preset, split, truths_of  # noqa: E402
+from tune_tracker import SIGMA_BY_PERIOD, preset, split, split_arguments, truths_of  # noqa: E402
 
 from airspace_sim.dynamics import models  # noqa: E402
 from airspace_sim.tracking import IMM  # noqa: E402
@@ -77,10 +75,7 @@ def reversed_in_time(a, n):
 
 
 def main(argv=None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("directory", type=Path)
-    ap.add_argument("--split", choices=("train", "test"), default="train")
-    ap.add_argument("--period", type=float, default=4.0)
+    ap = split_arguments(__doc__)
     ap.add_argument("--preset", default="imm-ct")
     a = ap.parse_args(argv)
     sigma = SIGMA_BY_PERIOD[a.period]
