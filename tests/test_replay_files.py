@@ -117,6 +117,23 @@ def _mixed_scenario(tmp_path):
     return path
 
 
+def test_recorded_traffic_gets_the_recorded_tracker_unless_one_is_named(tmp_path):
+    from airspace_sim.dynamics.presets import RECORDED_TRACKER
+    from airspace_sim.scenarios import load
+
+    path = _mixed_scenario(tmp_path)
+    assert RECORDED_TRACKER == "imm-ct"
+    sc = load(path)
+    assert sc.tracker.model == RECORDED_TRACKER
+    assert World(sc).tracker_preset.name == RECORDED_TRACKER  # what the trackers run
+    assert load(path, ['tracker.model="realistic"']).tracker.model == "realistic"
+    named = tmp_path / "named.toml"
+    named.write_text(path.read_text() + '[tracker]\nmodel = "turn-rate"\n')
+    assert load(named).tracker.model == "turn-rate"
+    # no recorded file: the simulated traffic's own modes
+    assert load(path, ['recorded.file=""']).tracker.model == "realistic"
+
+
 def test_recorded_aircraft_are_never_env_agents(tmp_path):
     import airspace_sim.env as aenv
 

@@ -117,7 +117,8 @@ def test_evaluate_tracker_command_on_a_recorded_file(tmp_path, capsys):
     out = tmp_path / "r.json"
     assert cli.main(["evaluate-tracker", str(tmp_path / "f.csv"), "--json", str(out)]) == 0
     text = capsys.readouterr().out
-    assert "sigma=50 m, period=1 s, preset=realistic" in text and "sigma=100 m, period=4 s" in text
+    # the default preset is the one for recorded traffic
+    assert "sigma=50 m, period=1 s, preset=imm-ct" in text and "sigma=100 m, period=4 s" in text
     import json
 
     rows = json.loads(out.read_text())

@@ -25,7 +25,8 @@ def add_arguments(parser) -> None:
     )  # fmt: skip
     parser.add_argument(
         "--preset", action="append", default=None, metavar="NAME",
-        help="tracker preset(s) to measure (repeatable; default realistic)",
+        help="tracker preset(s) to measure (repeatable; default imm-ct, the tracker for "
+        "recorded traffic)",
     )  # fmt: skip
     parser.add_argument("--seed", type=int, default=0, help="measurement-noise seed (default 0)")
     parser.add_argument(
@@ -68,7 +69,7 @@ def run(args) -> int:
 
     paths = _paths(args)
     flights = [f for p in paths for f in read(p)]
-    chosen = [presets.get(name) for name in (args.preset or ["realistic"])]
+    chosen = [presets.get(name) for name in (args.preset or [presets.RECORDED_TRACKER])]
     results = []
     for sigma, period in SETTINGS:
         truths = []

@@ -570,6 +570,12 @@ PRESETS = {
     "imm-ct": imm_ct,
 }
 
+#: The tracker preset for recorded (real) traffic: the best position filter on held-out real
+#: flights (``docs/tracking.md``) and, in replays of real traffic, fewer false alerts than
+#: ``realistic`` (``docs/real-traffic.md``). Simulated traffic keeps ``realistic``, whose
+#: modes are the traffic's own.
+RECORDED_TRACKER = "imm-ct"
+
 
 #: (name, factory, dt) -> Preset: a world (and every env reset) asks for the same preset,
 #: and rebuilding Π = expm(Λ dt) was ~90% of a reset. Presets are frozen and hold only

@@ -604,6 +604,7 @@ def from_dict(
     overrides = [overrides] if isinstance(overrides, str) else list(overrides)
     _drop_params_of_replaced_kinds(data, overrides)
     set_paths = apply_overrides(data, overrides)
+    _recorded_tracker_default(data)
     if name is not None:
         data.setdefault("name", name)
     try:
@@ -619,6 +620,20 @@ def from_dict(
             "[traffic] with a count or a [recorded] file), got none: nothing to simulate"
         )
     return sc
+
+
+def _recorded_tracker_default(data: dict) -> None:
+    """A scenario that replays recorded traffic and names no tracker model gets
+    :data:`~airspace_sim.dynamics.presets.RECORDED_TRACKER` (in place): the measured best on
+    real flights, where ``realistic``'s known-rate modes are the simulated traffic's."""
+    from airspace_sim.dynamics.presets import RECORDED_TRACKER
+
+    recorded = data.get("recorded")
+    if not (isinstance(recorded, dict) and recorded.get("file")):
+        return
+    tracker = data.setdefault("tracker", {})
+    if isinstance(tracker, dict):  # anything else is refused by the validation
+        tracker.setdefault("model", RECORDED_TRACKER)
 
 
 #: the scenario tables whose ``params`` belong to their ``kind``

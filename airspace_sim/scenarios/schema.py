@@ -46,7 +46,9 @@ class TrackerSpec:
     """The tracker each ownship runs for every intruder in range."""
 
     kind: str = "imm"  #: registry name of the tracker ("imm", or a plugin such as "kalman")
-    model: str = "realistic"  #: dynamics preset the tracker's mode filters use
+    #: dynamics preset the tracker's mode filters use; a scenario with recorded traffic
+    #: ([recorded] file) that does not name one gets ``presets.RECORDED_TRACKER`` (imm-ct)
+    model: str = "realistic"
     #: the tracker's own parameters (its ``Params``, e.g. the kalman tracker's
     #: ``sigma_accel``; validated by the loader)
     params: dict = field(default_factory=dict)
