@@ -214,8 +214,34 @@ def test_onset_bins_add_up_to_the_turning_flags():
     assert sum(s * f for _, _, s, f in ev.onset if s) == pytest.approx(ev.turning_flagged)
     # turns of 60-90 s: the first 15 s are flagged less than the rest (detection delay)
     assert ev.onset[0][3] < ev.onset[1][3]
-    assert "since the turn began" in ev.lines()[-1]
+    assert "since the turn began" in ev.lines()[-2]
     assert ev.to_dict()["onset"][-1]["to_s"] is None
+
+
+def test_since_turn_end_counts_seconds_from_the_end_of_the_last_turn():
+    w = np.radians([[0.0], [0.2], [0.6], [-1.0], [0.1], [0.0], [0.7], [0.3], [np.nan]])
+    got = evaluation.since_turn_end(w, 2.0)[:, 0]
+    want = [np.inf, np.inf, np.nan, np.nan, 2, 4, np.nan, 2, 4]
+    np.testing.assert_array_equal(got, want)
+
+
+def test_phases_partition_the_seconds_and_their_errors():
+    """Every evaluated second is in one phase, so the shares add to 1 and the phases' mean
+    squared errors, weighted by their shares, give back the overall RMSEs."""
+    t, X = flight(LEGS)
+    truths = [evaluation.Truth("f", t, X), evaluation.Truth("g", t, X * [1, 1, -1, -1, -1])]
+    ev = evaluation.evaluate(truths, presets.get("imm-ct"), 50.0, 1.0, seed=3, cv_sigmas=(2.0,))
+    assert [(ph, lo) for ph, lo, *_ in ev.phases] == [
+        (ph, lo) for ph in ("turn", "after") for lo in (0.0, 15.0, 30.0)
+    ]
+    shares = np.array([p[3] for p in ev.phases])
+    assert shares.sum() == pytest.approx(1.0) and np.all(shares > 0)
+    imm, cv = (np.array([p[k] for p in ev.phases]) for k in (4, 5))
+    assert np.sqrt(np.sum(shares * imm**2)) == pytest.approx(ev.pos_imm, rel=1e-9)
+    assert np.sqrt(np.sum(shares * cv**2)) == pytest.approx(ev.pos_cv, rel=1e-9)
+    # long straight legs: the IMM's quiet mode beats a CV filter tuned for the turns
+    assert imm[5] < cv[5]
+    assert "by phase" in ev.lines()[-1] and ev.to_dict()["phases"][2]["to_s"] is None
 
 
 def test_tuning_and_floor_scripts_run_on_flights_made_here(tmp_path, monkeypatch, capsys):

@@ -32,7 +32,9 @@ regime (straight or not), its along-track acceleration — give the position RMS
 with that knowledge reaches; their ratios to the best-tuned CV filter are the floors of the
 IMM / CV ratio (``docs/tracking.md``, ``docs/benchmarks/tracker_floor.py``). The turn
 flags are also broken down by the time since the turn began (:attr:`Evaluation.onset`):
-how much of the shortfall is detection delay.
+how much of the shortfall is detection delay; and both filters' position errors by phase
+(:attr:`Evaluation.phases`: in a turn or after one, by the seconds since it began or ended):
+where the IMM gains on the CV filter and where it loses.
 
 Flights are given as arrays (times in seconds, east/north positions in metres in a local
 frame), so any reader can feed this module; the ``evaluate-tracker`` command reads files.
@@ -66,7 +68,8 @@ SMOOTH_S = 31.0
 BURN_IN_S = 60.0
 #: A turn begins when |ω| reaches this (deg/s) with a sign it keeps (:func:`since_onset`).
 ONSET_DEG_S = 0.5
-#: Edges (s) of the time-since-onset bins of :attr:`Evaluation.onset`.
+#: Edges (s) of the time-since-onset bins of :attr:`Evaluation.onset`, and of the
+#: phases of :attr:`Evaluation.phases` (since a turn began, since it ended).
 ONSET_BINS_S = (0.0, 15.0, 30.0, math.inf)
 
 
@@ -188,6 +191,11 @@ class Evaluation:
     #: per :data:`ONSET_BINS_S` bin [lo, hi) of seconds since the turn began: (lo, hi,
     #: share of the turning seconds, share of those flagged with the right sign)
     onset: list = field(default_factory=list)
+    #: where the position errors are: per phase ("turn" and :data:`ONSET_BINS_S` bin of
+    #: seconds since it began, or "after" a turn and the bin of seconds since it ended; a
+    #: flight's seconds before its first turn count as long after one): (phase, lo, hi,
+    #: share of the evaluated seconds, IMM position RMSE m, best CV position RMSE m)
+    phases: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
         """The figures as JSON-ready Python values."""
@@ -197,6 +205,11 @@ class Evaluation:
             {"from_s": lo, "to_s": None if math.isinf(hi) else hi, "share": share, "flagged": fl}
             for lo, hi, share, fl in self.onset
         ]
+        d["phases"] = [
+            {"phase": ph, "from_s": lo, "to_s": None if math.isinf(hi) else hi, "share": share,
+             "pos_imm": imm, "pos_cv": cv}
+            for ph, lo, hi, share, imm, cv in self.phases
+        ]  # fmt: skip
         return d
 
     def lines(self) -> list[str]:
@@ -223,6 +236,11 @@ class Evaluation:
             + "; ".join(
                 f"{lo:g}-{hi:g} s {100 * share:.0f}% of them, flagged {100 * fl:.0f}%"
                 for lo, hi, share, fl in self.onset
+            ),
+            "  position RMSE by phase, IMM / CV m (share of the seconds): "
+            + "; ".join(
+                f"{ph} {lo:g}-{hi:g} s {imm:.1f} / {cv:.1f} ({100 * share:.0f}%)"
+                for ph, lo, hi, share, imm, cv in self.phases
             ),
         ]
 
@@ -266,6 +284,18 @@ def since_onset(omega, period_s: float):
     new = (s != 0) & np.vstack([np.ones((1,) + s.shape[1:], bool), s[1:] != s[:-1]])
     start = np.maximum.accumulate(np.where(new, k, -1), axis=0)
     return np.where(s != 0, (k - start) * period_s, np.nan)
+
+
+def since_turn_end(omega, period_s: float):
+    """Seconds since the last turn ended, (T, F), from turn rates ``omega`` (T, F) rad/s
+    every ``period_s``: NaN while turning (|ω| ≥ :data:`ONSET_DEG_S`, as
+    :func:`since_onset`), infinite before a flight's first turn (NaN rates are not turns)."""
+    w = np.abs(np.nan_to_num(np.asarray(omega, dtype=float)))
+    turning = w >= math.radians(ONSET_DEG_S)
+    k = np.arange(turning.shape[0]).reshape((-1,) + (1,) * (turning.ndim - 1))
+    last = np.maximum.accumulate(np.where(turning, k, -1), axis=0)
+    since = np.where(last >= 0, (k - last) * period_s, np.inf)
+    return np.where(turning, np.nan, since)
 
 
 def known_motion_rmse(
@@ -477,6 +507,13 @@ def evaluate(
         b = turning & (onset_s >= lo) & (onset_s < hi)
         share = float(b.sum() / max(turning.sum(), 1))
         onset.append((lo, hi, share, float(right[b].mean()) if b.any() else float("nan")))
+    phases = []
+    after_s = since_turn_end(X[..., 4], period_s)
+    for phase, t_s in (("turn", onset_s), ("after", after_s)):
+        for lo, hi in zip(ONSET_BINS_S[:-1], ONSET_BINS_S[1:]):
+            b = ev & (t_s >= lo) & ((t_s < hi) | math.isinf(hi))  # NaN: the other phase
+            rmse = [_rmse(e[b][:, [0, 2]]) for e in (e_imm, e_cv)]
+            phases.append((phase, lo, hi, float(b.sum() / max(ev.sum(), 1)), *rmse))
     return Evaluation(
         sigma_m=sigma_m,
         period_s=period_s,
@@ -502,4 +539,5 @@ def evaluate(
         gated=gated,
         cv_grid=grid,
         onset=onset,
+        phases=phases,
     )
