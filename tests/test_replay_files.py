@@ -8,6 +8,7 @@ closed-form geometry (one LoS pair in the crossing), the ids the files hold.
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -213,3 +214,51 @@ def test_sigterm_ends_a_replay_like_ctrl_c_with_its_outputs_written(tmp_path):
     assert s["frames"] == len(pngs) >= 3
     with Image.open(frames / "run.gif") as gif:
         assert gif.n_frames == len(pngs)
+
+
+def test_ownship_benchmark_counts_the_loss_it_avoids(tmp_path, monkeypatch, capsys):
+    """docs/benchmarks/ownship_in_real_traffic.py on a recording made here: one slow aircraft
+    passes the data's centre when the ownship, crossing through the centre from any side,
+    gets there. Without avoidance that is one loss, the intruder in the world from the
+    start; with the ring's resolver none, and the ownship still arrives."""
+    import sys
+    from pathlib import Path
+
+    radius, speed = 20000.0, 230.0
+    meet = radius / speed  # s: the ownship at the centre
+    span = 2 * radius / speed + 300.0  # the cases' start times are then all 0
+    t = np.arange(0.0, span, 10.0)
+    slow = _line("S", (0.0, 0.0), 30.0, t)
+    # _line flies at 200 m/s; slow it to 50 m/s, at the centre at `meet`
+    x = (slow.x_m - slow.x_m[0]) / 4 + 50.0 * math.cos(math.radians(30)) * -meet
+    y = (slow.y_m - slow.y_m[0]) / 4 + 50.0 * math.sin(math.radians(30)) * -meet
+    from airspace_sim.recorded.flights import Flight, turn_rates
+
+    s = Flight("S", "S", "", t, x, y, slow.vx / 4, slow.vy / 4,
+               turn_rates(t, slow.vx, slow.vy), slow.altitude_m)  # fmt: skip
+    _write_csv(tmp_path / "f.csv", [s])  # in the frame centred at (47, 8)
+    bench = Path(__file__).resolve().parents[1] / "docs" / "benchmarks"
+    monkeypatch.syspath_prepend(str(bench))
+    sys.modules.pop("ownship_in_real_traffic", None)
+    import ownship_in_real_traffic as bench_mod
+
+    out = tmp_path / "rows.jsonl"
+    ring = str(bench.parents[1] / "scenarios" / "ring.toml")
+    args = ["--file", str(tmp_path / "f.csv"), "--cases", "2", "--radius", str(radius),
+            "--offset", "0", "--min-altitude-ft", "0", "--tracker", "imm-ct", "--centre", "47", "8",
+            "--kinds", "none", ring, "--out", str(out)]  # fmt: skip
+    assert bench_mod.main(args) == 0
+    rows = [json.loads(line) for line in out.read_text().splitlines()]
+    want = [(0, "none"), (0, ring), (1, "none"), (1, ring)]
+    assert [(r["case"], r["kind"]) for r in rows] == want
+    for r in rows:
+        assert r["start_s"] == 0 and r["arrived"] == 1
+        if r["kind"] == "none":
+            assert r["los_pairs"] == 1 and r["closest_m"] < 1000.0
+            assert r["los_entered_s"] == [0]  # there from the start: not a pop-in
+            assert 0.8 * meet - 20 < r["los_at_s"][0] < meet
+        else:
+            assert r["los_pairs"] == 0 and r["closest_m"] >= 3000.0
+    text = capsys.readouterr().out
+    assert "none imm-ct: 2 crossings, LoS pairs 2 in 2 (0 within 30 s of the start, 0 with" in text
+    assert f"{ring} imm-ct: 2 crossings, LoS pairs 0" in text
