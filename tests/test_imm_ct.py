@@ -151,13 +151,14 @@ def test_straight_and_estimated_turn_equal_filterpy_imm():
     assert abs(math.degrees(imm.x_modes[0, 1, 4]) + 1.0) < 0.3
 
 
-def test_imm_ct_three_modes_with_their_own_noise_equal_filterpy_imm():
-    """The imm-ct preset (quiet CV, estimated-rate CT, manoeuvring CV, each with its own
+@pytest.mark.parametrize("name", ["imm-ct", "imm-ct-airliner"])
+def test_imm_ct_three_modes_with_their_own_noise_equal_filterpy_imm(name):
+    """The imm-ct presets (quiet CV, estimated-rate CT, manoeuvring CV, each with its own
     σ_a) against filterpy's IMMEstimator over a KalmanFilter, an EKF and a KalmanFilter
     whose Q are the closed-form white-noise-acceleration matrices written here."""
     rng = np.random.default_rng(6)
     T, sigma = 4.0, 100.0
-    p = presets.get("imm-ct", dt=T).with_(measurement_sigma=sigma)
+    p = presets.get(name, dt=T).with_(measurement_sigma=sigma)
     a = p.imm_arguments()
     assert a["estimated_turn_rate"].tolist() == [False, True, False]
     for j, sa in enumerate(p.filter_mode_sigma_accel):
@@ -175,7 +176,23 @@ def test_imm_ct_three_modes_with_their_own_noise_equal_filterpy_imm():
     imm_equals_filterpy(imm, ref, turning_measurements(rng, 80, T, sigma))
 
 
-@pytest.mark.parametrize("name", ["realistic", "turn-rate", "imm-ct"])
+def test_imm_ct_airliner_mode_chain_has_its_mean_sojourns():
+    """The airliner preset's Π is the continuous-time chain of its mean sojourns (900, 60,
+    10 s) and imm-ct's switch probabilities: the generator recovered by the matrix logarithm
+    of Π over dt has -1/Λ_jj = sojourn_j and off-diagonal shares equal to the switches."""
+    from scipy.linalg import logm
+
+    for dt in (1.0, 4.0):
+        p = presets.get("imm-ct-airliner", dt=dt)
+        L = np.real(logm(np.asarray(p.transition_matrix))) / dt
+        np.testing.assert_allclose(-1.0 / np.diag(L), [900.0, 60.0, 10.0], rtol=1e-9)
+        shares = L / -np.diag(L)[:, None]
+        np.fill_diagonal(shares, 0.0)
+        np.testing.assert_allclose(shares, presets.get("imm-ct").switch_probabilities, atol=1e-9)
+        assert p.filter_mode_sigma_accel == (0.1, 1.0, 4.0)
+
+
+@pytest.mark.parametrize("name", ["realistic", "turn-rate", "imm-ct", "imm-ct-airliner"])
 def test_step_with_dt_equals_model_built_at_dt(name):
     rng = np.random.default_rng(5)
     p = presets.get(name)

@@ -542,6 +542,25 @@ def imm_ct(dt: float = 1.0) -> Preset:
     )
 
 
+def imm_ct_airliner(dt: float = 1.0) -> Preset:
+    """:func:`imm_ct` for airliner traffic: a quieter straight mode held longer (σ_a 0.1
+    m/s², mean sojourn 900 s), the turn mode at σ_a 1 m/s², the manoeuvring mode at 4 m/s².
+    Tuned on half the flights of the traffic wheel's ``collections/switzerland`` (even
+    positions), measured on the other half (``docs/tracking.md``). A tracker, not a
+    traffic model."""
+    sojourn = (900.0, 60.0, 10.0)
+    base = imm_ct(dt)
+    return replace(
+        base,
+        name="imm-ct-airliner",
+        transition_matrix=_tup(
+            markov.transition_matrix_from_sojourn(sojourn, dt, base.switch_probabilities)
+        ),
+        sojourn_s=sojourn,
+        filter_mode_sigma_accel=(0.1, 1.0, 4.0),
+    )
+
+
 def imm_cta(dt: float = 1.0) -> Preset:
     """:func:`imm_ct` with the along-track acceleration in the turn mode's state: quiet
     constant velocity, a coordinated turn at the estimated rate Ω *and* estimated
@@ -568,6 +587,7 @@ PRESETS = {
     "dense-turns": dense_turns,
     "turn-rate": turn_rate,
     "imm-ct": imm_ct,
+    "imm-ct-airliner": imm_ct_airliner,
 }
 
 #: The tracker preset for recorded (real) traffic: the best position filter on held-out real

@@ -24,15 +24,13 @@ from __future__ import annotations
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 from scipy.signal import savgol_filter
-from tune_tracker import SIGMA_BY_PERIOD, preset, split, split_arguments
+from tune_tracker import SIGMA_BY_PERIOD, flights_of, preset, split, split_arguments, truths_of
 
-from airspace_sim.recorded import read
 from airspace_sim.tracking.evaluation import (
     MAX_GAP_S,
     SMOOTH_S,
     Truth,
     evaluate,
-    resample,
     retime,
 )
 
@@ -55,36 +53,35 @@ def _flown(name, fine, heading, speed, x0, y0, period_s):
 def truths(files, period_s, how, heading_smooth_s=0.0):
     out = []
     win = int(SMOOTH_S) | 1
-    for path in files:
-        for f in read(path):
-            cuts = np.flatnonzero(np.diff(f.t_s) > MAX_GAP_S) + 1
-            for seg, (a, b) in enumerate(zip(np.r_[0, cuts], np.r_[cuts, f.t_s.size])):
-                t = f.t_s[a:b]
-                if b - a < 4 or t[-1] - t[0] < max(300.0, 2 * SMOOTH_S):
-                    continue  # as resample
-                x, y, vx, vy = (v[a:b] for v in (f.x_m, f.y_m, f.vx, f.vy))
-                ground = np.hypot(vx, vy)
-                if not np.all(np.isfinite(ground)):
-                    continue
-                fine = np.arange(t[0], t[-1], 1.0)
-                speed = savgol_filter(np.interp(fine, t, ground), win, 3, mode="interp")
-                if how == "speed":
-                    ts, keep = retime(t, x, y, ground)
-                    vel = [
-                        savgol_filter(np.interp(fine, ts, v[keep]), win, 3, deriv=1, mode="interp")
-                        for v in (x, y)
-                    ]
-                    heading = np.unwrap(np.arctan2(vel[1], vel[0]))
-                    if heading_smooth_s > 0:
-                        heading = gaussian_filter1d(heading, heading_smooth_s, mode="nearest")
-                else:
-                    track = np.unwrap(np.arctan2(vy, vx))
-                    bearing = np.arctan2(np.gradient(y), np.gradient(x))
-                    offset = np.angle(np.median(np.exp(1j * (bearing - track))))
-                    heading = savgol_filter(
-                        np.interp(fine, t, track + offset), TRACK_SMOOTH_S, 3, mode="interp"
-                    )
-                out.append(_flown(f"{f.id}#{seg}", fine, heading, speed, x[0], y[0], period_s))
+    for f in flights_of(files):
+        cuts = np.flatnonzero(np.diff(f.t_s) > MAX_GAP_S) + 1
+        for seg, (a, b) in enumerate(zip(np.r_[0, cuts], np.r_[cuts, f.t_s.size])):
+            t = f.t_s[a:b]
+            if b - a < 4 or t[-1] - t[0] < max(300.0, 2 * SMOOTH_S):
+                continue  # as resample
+            x, y, vx, vy = (v[a:b] for v in (f.x_m, f.y_m, f.vx, f.vy))
+            ground = np.hypot(vx, vy)
+            if not np.all(np.isfinite(ground)):
+                continue
+            fine = np.arange(t[0], t[-1], 1.0)
+            speed = savgol_filter(np.interp(fine, t, ground), win, 3, mode="interp")
+            if how == "speed":
+                ts, keep = retime(t, x, y, ground)
+                vel = [
+                    savgol_filter(np.interp(fine, ts, v[keep]), win, 3, deriv=1, mode="interp")
+                    for v in (x, y)
+                ]
+                heading = np.unwrap(np.arctan2(vel[1], vel[0]))
+                if heading_smooth_s > 0:
+                    heading = gaussian_filter1d(heading, heading_smooth_s, mode="nearest")
+            else:
+                track = np.unwrap(np.arctan2(vy, vx))
+                bearing = np.arctan2(np.gradient(y), np.gradient(x))
+                offset = np.angle(np.median(np.exp(1j * (bearing - track))))
+                heading = savgol_filter(
+                    np.interp(fine, t, track + offset), TRACK_SMOOTH_S, 3, mode="interp"
+                )
+            out.append(_flown(f"{f.id}#{seg}", fine, heading, speed, x[0], y[0], period_s))
     return out
 
 
@@ -96,10 +93,7 @@ def main(argv=None) -> None:
     a = ap.parse_args(argv)
     files = split(a.directory, a.split)
     if a.truth == "resample":  # the evaluation's own, for comparison in one run
-        tr = []
-        for path in files:
-            for f in read(path):
-                tr += resample(f.id, f.t_s, f.x_m, f.y_m, a.period, np.hypot(f.vx, f.vy))
+        tr = truths_of(files, a.period)
     else:
         tr = truths(files, a.period, a.truth, a.heading_smooth_s)
     speed = np.concatenate([np.hypot(t.state[:, 1], t.state[:, 3]) for t in tr])

@@ -4,7 +4,9 @@
         --candidate '{"filter_mode_sigma_accel": [0.3, 0.5, 3.0]}' ...
 
 DIR holds the traffic 2.8.1 ``calibration/*.json.gz`` samples (never committed). Flights in
-name order: even positions are the training half, odd the test half. Each candidate is a
+name order: even positions are the training half, odd the test half. DIR may also be one
+collection file (the extracted ``collections/switzerland.json.gz``): its flights in order,
+split the same way. Each candidate is a
 JSON object of :class:`~airspace_sim.dynamics.presets.Preset` fields changed on ``--preset``
 (default imm-ct, or ``imm-cta``, which has no preset name; rates in deg/s and σ_Ω in
 deg/s per √s here); one line per candidate:
@@ -49,18 +51,33 @@ def split_arguments(doc: str, period: bool = True) -> argparse.ArgumentParser:
     return ap
 
 
-def split(directory: Path, half: str) -> list[Path]:
+def split(directory: Path, half: str) -> list:
+    """The half of the flights: of a folder of samples, the files in name order at even
+    (train) or odd (test) positions; of one file (a collection such as the extracted
+    ``collections/switzerland.json.gz``), ``[(file, half)]``: its flights at even or odd
+    positions (:func:`flights_of`)."""
+    if directory.is_file():
+        return [(directory, half)]
     files = sorted(directory.glob("*.json.gz"))
     return files[0::2] if half == "train" else files[1::2]
 
 
+def flights_of(sources):
+    """The recorded flights of :func:`split`'s sources, in order."""
+    for source in sources:
+        if isinstance(source, tuple):
+            path, half = source
+            yield from list(read(path))[0 if half == "train" else 1 :: 2]
+        else:
+            yield from read(source)
+
+
 def truths_of(files, period):
     out = []
-    for path in files:
-        for f in read(path):
-            speed = np.hypot(f.vx, f.vy)
-            out += resample(f.id, f.t_s, f.x_m, f.y_m, period,
-                            speed_mps=speed if np.all(np.isfinite(speed)) else None)  # fmt: skip
+    for f in flights_of(files):
+        speed = np.hypot(f.vx, f.vy)
+        out += resample(f.id, f.t_s, f.x_m, f.y_m, period,
+                        speed_mps=speed if np.all(np.isfinite(speed)) else None)  # fmt: skip
     return out
 
 
