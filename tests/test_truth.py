@@ -181,7 +181,9 @@ def test_preset_validation(kwargs, match):
 
 
 def test_unknown_preset_and_bad_simulate_inputs():
-    with pytest.raises(UserError, match="known: dense-turns, imm-ct, imm-ct-airliner, realistic, seed, turn-rate"):
+    with pytest.raises(
+        UserError, match="known: dense-turns, imm-ct, imm-ct-airliner, realistic, seed, turn-rate"
+    ):
         presets.get("nope")
     p = presets.get("realistic")
     with pytest.raises(UserError, match="x0"):
