@@ -298,3 +298,29 @@ def test_tuning_and_floor_scripts_run_on_flights_made_here(tmp_path, monkeypatch
     assert got["CV"] == 1.0 and got["rate"] < 1.0
     assert got["rate + regime"] <= got["rate"] and got["rate + along-track"] < 1.0
     assert "preset imm-ct" in got
+
+
+def test_tune_tracker_splits_a_collection_file_by_flight(tmp_path, monkeypatch):
+    """docs/benchmarks/tune_tracker.py on one collection file: its flights in order, even
+    positions the training half, odd the test half."""
+    pytest.importorskip("airspace_sim.recorded")
+    pd = pytest.importorskip("pandas")
+    import sys
+    from pathlib import Path
+
+    rows = []
+    for i in range(5):
+        for k in range(30):
+            rows.append({
+                "timestamp": 1515748470000 + 10000 * k, "icao24": f"abc12{i}",
+                "latitude": 47.0 + 0.01 * i, "longitude": 8.0 + 0.002 * k,
+                "groundspeed": 300.0, "track": 90.0, "callsign": f"T{i}", "altitude": 30000,
+            })  # fmt: skip
+    pd.DataFrame(rows).to_json(tmp_path / "c.json.gz", orient="records")
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[1] / "docs" / "benchmarks"))
+    sys.modules.pop("tune_tracker", None)
+    import tune_tracker
+
+    for half, want in (("train", ["abc120", "abc122", "abc124"]), ("test", ["abc121", "abc123"])):
+        sources = tune_tracker.split(tmp_path / "c.json.gz", half)
+        assert [f.icao24 for f in tune_tracker.flights_of(sources)] == want
