@@ -590,10 +590,9 @@ PRESETS = {
     "imm-ct-airliner": imm_ct_airliner,
 }
 
-#: The tracker preset for recorded (real) traffic: the best position filter on held-out real
-#: flights (``docs/tracking.md``) and, in replays of real traffic, fewer false alerts than
-#: ``realistic`` (``docs/real-traffic.md``). Simulated traffic keeps ``realistic``, whose
-#: modes are the traffic's own.
+#: The tracker preset for recorded (real) traffic, chosen on real flights over ``realistic``
+#: and ``imm-ct-airliner`` (``docs/tracking.md``, ``docs/real-traffic.md``). Simulated
+#: traffic keeps ``realistic``, whose modes are the traffic's own.
 RECORDED_TRACKER = "imm-ct"
 
 

@@ -624,7 +624,7 @@ def from_dict(
 
 def _recorded_tracker_default(data: dict) -> None:
     """A scenario that replays recorded traffic and names no tracker model gets
-    :data:`~airspace_sim.dynamics.presets.RECORDED_TRACKER` (in place): the measured best on
+    :data:`~airspace_sim.dynamics.presets.RECORDED_TRACKER` (in place): a tracker chosen on
     real flights, where ``realistic``'s known-rate modes are the simulated traffic's."""
     from airspace_sim.dynamics.presets import RECORDED_TRACKER
 
