@@ -172,7 +172,8 @@ def summary(rows) -> None:
         r = [x for x in rows if x["kind"] == kind and x["tracker"] == tracker]
         losses = [(e, t) for x in r for e, t in zip(x["los_entered_s"], x["los_at_s"])]
         start = sum(t < WARM_UP_S for _, t in losses)
-        late = sum(0 < e and t - e < sc_lookahead(kind) for e, t in losses)
+        lookahead = sc_lookahead(kind)
+        late = sum(0 < e and t - e < lookahead for e, t in losses)
         path = [x["extra_path_pct"] for x in r if x["arrived"]]
         print(
             f"{kind} {tracker}: {len(r)} crossings, LoS pairs {len(losses)} in "
@@ -193,7 +194,6 @@ def main(argv=None) -> int:
     probe = scenario(a, 0.0, np.zeros(2), np.ones(2), "none", "realistic")
     flights = load_flights(probe.recorded, probe.source)
     todo = cases(a, flights.end_s - flights.start_s)
-    out = open(a.out, "a") if a.out else None
     rows = []
     for i, (start, entry, exit_) in enumerate(todo):
         for tracker in a.tracker:
@@ -205,8 +205,9 @@ def main(argv=None) -> int:
                 rows.append(row)
                 line = json.dumps(row)
                 print(line, flush=True)
-                if out:
-                    print(line, file=out, flush=True)
+                if a.out:
+                    with open(a.out, "a") as out:  # a killed run keeps its lines
+                        print(line, file=out)
     summary(rows)
     return 0
 
