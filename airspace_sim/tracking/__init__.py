@@ -11,6 +11,8 @@ matched IMM (mode names included) that can step with any time since the last ste
 - gating diagnostics: ``imm.gated`` (B,) says which finite measurements were rejected,
   ``imm.nis`` their NIS and :func:`gate_threshold` the d² a probability gives;
 - :func:`chi2_band`, :func:`nees`, :func:`nis`: consistency statistics;
+- :func:`smooth`: the fixed-interval IMM smoother over a forward run's record (states and
+  mode probabilities given the whole record: labelling recorded flights after the fact);
 - :mod:`.coordinated_turn`: the estimated-rate (EKF) mode; :mod:`.evaluation`: trackers
   measured on recorded flights.
 """
@@ -18,14 +20,17 @@ matched IMM (mode names included) that can step with any time since the last ste
 from airspace_sim.tracking.consistency import chi2_band, nees, nis
 from airspace_sim.tracking.imm import DEFAULT_GATE_PROBABILITY, IMM, SlotIMM, gate_threshold
 from airspace_sim.tracking.initialisation import two_point_initialisation
+from airspace_sim.tracking.smoother import Smoothed, smooth
 
 __all__ = [
     "DEFAULT_GATE_PROBABILITY",
     "IMM",
     "SlotIMM",
+    "Smoothed",
     "chi2_band",
     "gate_threshold",
     "nees",
     "nis",
+    "smooth",
     "two_point_initialisation",
 ]
