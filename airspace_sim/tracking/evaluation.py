@@ -196,6 +196,15 @@ class Evaluation:
     #: flight's seconds before its first turn count as long after one): (phase, lo, hi,
     #: share of the evaluated seconds, IMM position RMSE m, best CV position RMSE m)
     phases: list = field(default_factory=list)
+    #: after the fact (``evaluate(smoother=True)``; None otherwise or for a model the
+    #: smoother does not take): both filters smoothed over each whole flight, position RMSE
+    #: of the smoothed IMM and of the RTS-smoothed best CV filter, and the smoothed IMM's
+    #: turn flags scored as the filter's
+    pos_imm_smoothed: float | None = None
+    pos_cv_smoothed: float | None = None
+    smoothed_turning_flagged: float | None = None
+    smoothed_turning_flagged_wrong_sign: float | None = None
+    smoothed_straight_flagged: float | None = None
 
     def to_dict(self) -> dict:
         """The figures as JSON-ready Python values."""
@@ -242,6 +251,18 @@ class Evaluation:
                 f"{ph} {lo:g}-{hi:g} s {imm:.1f} / {cv:.1f} ({100 * share:.0f}%)"
                 for ph, lo, hi, share, imm, cv in self.phases
             ),
+        ] + self._smoothed_lines()
+
+    def _smoothed_lines(self) -> list[str]:
+        if self.pos_imm_smoothed is None:
+            return []
+        return [
+            f"  after the fact (fixed-interval smoothers): position RMSE IMM "
+            f"{self.pos_imm_smoothed:.1f} m, CV {self.pos_cv_smoothed:.1f} m (ratio "
+            f"{self.pos_imm_smoothed / self.pos_cv_smoothed:.3f}); turning seconds flagged "
+            f"{100 * self.smoothed_turning_flagged:.1f}% (wrong sign "
+            f"{100 * self.smoothed_turning_flagged_wrong_sign:.1f}%), straight "
+            f"{100 * self.smoothed_straight_flagged:.2f}%",
         ]
 
 
@@ -403,19 +424,71 @@ def _initial_state(Z, period_s: float, R, n_state: int):
     return x6, P6
 
 
-def turn_probabilities(imm, known, turning_modes, rate):
-    """(B,), (B,): the probability, by the IMM's mixture, of a left and of a right turn at
-    ``rate`` rad/s or more. known (M,) each mode's known turn rate (NaN: estimated, use the
-    mode's Ω̂ and its variance); turning_modes (M,) bool."""
+def turn_probabilities(mu, x_modes, P_modes, known, turning_modes, rate):
+    """(...,), (...,): the probability, by an IMM's mixture, of a left and of a right turn at
+    ``rate`` rad/s or more. mu (..., M) mode probabilities, x_modes (..., M, n) and P_modes
+    (..., M, n, n) the mode-conditioned estimates (an IMM's, after a step, or a smoother's);
+    known (M,) each mode's known turn rate (NaN: estimated, use the mode's Ω̂ and its
+    variance); turning_modes (M,) bool."""
     from scipy.special import ndtr
 
-    w = imm.x_modes[..., 4]  # (B, M) Ω̂_j
-    sd = np.sqrt(np.maximum(imm.P_modes[..., 4, 4], 0.0))
+    w = x_modes[..., 4]  # (..., M) Ω̂_j
+    sd = np.sqrt(np.maximum(P_modes[..., 4, 4], 0.0))
     with np.errstate(divide="ignore", invalid="ignore"):
         left = np.where(np.isnan(known), ndtr((w - rate) / sd), known >= rate)
         right = np.where(np.isnan(known), ndtr((-w - rate) / sd), known <= -rate)
-    mu = np.where(turning_modes, imm.mu, 0.0)
-    return np.sum(mu * np.nan_to_num(left), axis=1), np.sum(mu * np.nan_to_num(right), axis=1)
+    m = np.where(turning_modes, mu, 0.0)
+    return np.sum(m * np.nan_to_num(left), axis=-1), np.sum(m * np.nan_to_num(right), axis=-1)
+
+
+#: Memory (bytes) a batch of flights' forward record may take when smoothing
+#: (K·B·M·n² covariances; flights are batched by length under it).
+SMOOTHER_BATCH_BYTES = 2**28
+
+
+def _smoothed_runs(Z, x0, P0, mu0, model: dict, lengths):
+    """The IMM of ``model`` run over the measurements Z (T, F, 2) from step 2 on, then
+    smoothed (:func:`airspace_sim.tracking.smoother.smooth`), in batches of flights of
+    similar length. Yields ``(flights (b,), L, Smoothed)`` with the records of steps
+    ``2..L-1``; ``lengths`` (F,) each flight's number of measured steps."""
+    from airspace_sim.tracking import IMM
+    from airspace_sim.tracking.smoother import smooth
+
+    M, n = len(mu0), x0.shape[1]
+    order = np.argsort(lengths, kind="stable")
+    i = 0
+    while i < order.size:
+        per_flight = max(int(lengths[order[i]]), 3) * M * n * (n + 1) * 8
+        b = order[i : i + max(1, SMOOTHER_BATCH_BYTES // per_flight)]
+        i += b.size
+        L = int(lengths[b].max())
+        imm = IMM(**model, x0=x0[b], P0=P0[b], mu0=mu0, gate_probability=1.0)
+        mu, xm, Pm = (np.empty((L - 2, b.size) + tail) for tail in ((M,), (M, n), (M, n, n)))
+        for k in range(2, L):
+            imm.step(Z[k, b])
+            mu[k - 2], xm[k - 2], Pm[k - 2] = imm.mu, imm.x_modes, imm.P_modes
+        yield b, L, smooth(mu, xm, Pm, model, n_steps=lengths[b] - 2)
+
+
+def _right_flags(p_left, p_right, X):
+    """(T, F) bool: a turn flagged (probability over one half) of the truth's sign."""
+    left, rightward = p_left > 0.5, p_right > 0.5
+    return (left & (X[..., 4] > 0)) | (rightward & (X[..., 4] < 0))
+
+
+def _flags(p_left, p_right, X, ev) -> dict:
+    """The turn flags' scores over the evaluated seconds ``ev`` (T, F): turning seconds
+    flagged with the right sign, with the wrong one, straight seconds flagged."""
+    omega = np.degrees(X[..., 4])
+    turning = ev & (np.abs(omega) >= TURNING_DEG_S)
+    straight = ev & (np.abs(omega) < STRAIGHT_DEG_S)
+    flagged = (p_left > 0.5) | (p_right > 0.5)
+    right = _right_flags(p_left, p_right, X)
+    return dict(
+        turning_flagged=float(right[turning].mean()),
+        turning_flagged_wrong_sign=float((flagged & ~right)[turning].mean()),
+        straight_flagged=float(flagged[straight].mean()),
+    )
 
 
 def evaluate(
@@ -426,6 +499,7 @@ def evaluate(
     seed: int = 0,
     cv_sigmas=CV_SIGMA_GRID,
     gate_probability: float = 1.0,
+    smoother: bool = True,
 ) -> Evaluation:
     """Run the preset's IMM and the CV grid on noisy measurements of ``truths``.
 
@@ -440,6 +514,11 @@ def evaluate(
     track whose model misses a manoeuvre would otherwise be gated for the rest of the
     flight (there is no re-initialisation here), which measures track loss, not accuracy.
     ``gated`` counts the measurements the given gate rejected.
+
+    ``smoother``: also smooth both filters over each whole flight (the IMM with
+    :func:`~airspace_sim.tracking.smoother.smooth`, the best CV filter with the same, one
+    mode: the RTS smoother) and score the smoothed turn flags and positions (always without
+    a gate): the turns a recorded flight holds, labelled after the fact.
     """
     from airspace_sim.tracking import IMM
 
@@ -466,22 +545,26 @@ def evaluate(
     for k in range(2, T):
         imm.step(Z[k])
         est[k] = imm.x[:, : models.N_STATE]
-        p_left[k], p_right[k] = turn_probabilities(imm, known, turning_modes, flag_rate)
+        p_left[k], p_right[k] = turn_probabilities(
+            imm.mu, imm.x_modes, imm.P_modes, known, turning_modes, flag_rate
+        )
         nis[k] = imm.nis
         gated += int(np.count_nonzero(imm.gated & ev[k]))
 
     # the CV filter as a one-mode IMM: the same kernel (fast on long batches), and the
     # one-mode IMM is a Kalman filter (tests/test_imm_filterpy.py)
+    def cv_model(sigma_a):
+        return dict(
+            transitions=models.constant_velocity(period_s)[None],
+            process_noise=models.white_noise_acceleration(sigma_a, period_s)[None],
+            measurement_matrix=models.position_measurement_matrix(),
+            measurement_noise=R, transition_matrix=[[1.0]],
+        )  # fmt: skip
+
     grid, cv_est = {}, {}
     for s in cv_sigmas:
-        kf = IMM(
-            transitions=models.constant_velocity(period_s)[None],
-            process_noise=models.white_noise_acceleration(s, period_s),
-            measurement_matrix=models.position_measurement_matrix(),
-            measurement_noise=R, transition_matrix=[[1.0]], x0=x0[:, :5], P0=P0[:, :5, :5],
-            mu0=[1.0],
-            gate_probability=gate_probability,
-        )  # fmt: skip
+        kf = IMM(**cv_model(s), x0=x0[:, :5], P0=P0[:, :5, :5], mu0=[1.0],
+                 gate_probability=gate_probability)  # fmt: skip
         e = np.full((T, F, 4), np.nan)
         for k in range(2, T):
             kf.step(Z[k])
@@ -490,13 +573,29 @@ def evaluate(
         grid[float(s)] = _rmse((e - X[..., :4])[ev][:, [0, 2]])
     best = min(grid, key=grid.get)
     cv = cv_est[best]
+    smoothed = {}
+    if smoother and not p.along_track().any():
+        lengths = np.isfinite(Z[..., 0]).sum(axis=0)
+        x_imm, x_cv = np.full((T, F, 4), np.nan), np.full((T, F, 4), np.nan)
+        s_left, s_right = np.full((T, F), np.nan), np.full((T, F), np.nan)
+        args = p.imm_arguments()
+        for b, L, sm in _smoothed_runs(Z, x0, P0, mu0, args, lengths):
+            x_imm[2:L, b] = sm.x[..., :4]
+            s_left[2:L, b], s_right[2:L, b] = turn_probabilities(
+                sm.mu, sm.x_modes, sm.P_modes, known, turning_modes, flag_rate
+            )
+        for b, L, sm in _smoothed_runs(Z, x0[:, :5], P0[:, :5, :5], [1.0], cv_model(best), lengths):
+            x_cv[2:L, b] = sm.x[..., :4]
+        smoothed = dict(
+            pos_imm_smoothed=_rmse((x_imm - X[..., :4])[ev][:, [0, 2]]),
+            pos_cv_smoothed=_rmse((x_cv - X[..., :4])[ev][:, [0, 2]]),
+            **{f"smoothed_{k}": v for k, v in _flags(s_left, s_right, X, ev).items()},
+        )
 
     omega = np.degrees(X[..., 4])
     turning = ev & (np.abs(omega) >= TURNING_DEG_S)
     straight = ev & (np.abs(omega) < STRAIGHT_DEG_S)
-    left, rightward = p_left > 0.5, p_right > 0.5
-    flagged = left | rightward
-    right = (left & (X[..., 4] > 0)) | (rightward & (X[..., 4] < 0))
+    right = _right_flags(p_left, p_right, X)
     same_sign = np.sign(est[..., 4]) == np.sign(X[..., 4])
     by_rate = np.abs(np.degrees(est[..., 4])) >= RATE_FLAG_DEG_S
     e_imm, e_cv = est[..., :4] - X[..., :4], cv - X[..., :4]
@@ -531,13 +630,12 @@ def evaluate(
         vel_cv_turn=_rmse(e_cv[turning][:, [1, 3]]),
         nis=float(ni.mean()),
         nis_band=chi2_band(2, int(ni.size), 0.95),
-        turning_flagged=float(right[turning].mean()),
-        turning_flagged_wrong_sign=float((flagged & ~right)[turning].mean()),
-        straight_flagged=float(flagged[straight].mean()),
+        **_flags(p_left, p_right, X, ev),
         turning_rate_flagged=float((by_rate & same_sign)[turning].mean()),
         straight_rate_flagged=float(by_rate[straight].mean()),
         gated=gated,
         cv_grid=grid,
         onset=onset,
         phases=phases,
+        **smoothed,
     )

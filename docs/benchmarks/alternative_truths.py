@@ -100,7 +100,7 @@ def main(argv=None) -> None:
     along = np.concatenate(
         [np.gradient(np.hypot(t.state[:, 1], t.state[:, 3]), a.period) for t in tr]
     )
-    ev = evaluate(tr, preset(a.preset), SIGMA_BY_PERIOD[a.period], a.period)
+    ev = evaluate(tr, preset(a.preset), SIGMA_BY_PERIOD[a.period], a.period, smoother=False)
     print(
         f"{a.split} {a.period:g}s truth={a.truth} heading-smooth={a.heading_smooth_s:g}s "
         f"{a.preset}: ratio {ev.pos_imm / ev.pos_cv:.3f} (IMM {ev.pos_imm:.1f} m, CV "

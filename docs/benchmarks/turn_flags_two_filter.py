@@ -52,7 +52,9 @@ def turn_probabilities(p, Z, period):
     left, right = np.full((T, F), np.nan), np.full((T, F), np.nan)
     for k in range(2, T):
         imm.step(Z[k])
-        left[k], right[k] = E.turn_probabilities(imm, known, turning, rate)
+        left[k], right[k] = E.turn_probabilities(
+            imm.mu, imm.x_modes, imm.P_modes, known, turning, rate
+        )
     return left, right
 
 
