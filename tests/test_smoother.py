@@ -7,6 +7,7 @@
 - Several modes: the exact smoother, a mixture over every mode sequence (a Kalman filter
   and RTS smoother per sequence, weighted by its posterior), on short records.
 - Records of different lengths in one batch smooth as each alone.
+- Fixed lag L: step k is the fixed-interval smoother's over the record up to k + L.
 """
 
 from __future__ import annotations
@@ -226,6 +227,40 @@ def test_records_of_different_lengths_smooth_as_each_alone():
     np.testing.assert_allclose(both.x_modes[:, 0], first.x_modes[:, 0], rtol=1e-9, atol=1e-6)
 
 
+def test_fixed_lag_is_the_fixed_interval_smoother_of_the_record_so_far(monkeypatch):
+    """Step k with lag L is step k of the fixed-interval smoother over the steps up to k + L;
+    lag 0 is the filter, a lag past the end the fixed-interval smoother; windows run in
+    chunks as one."""
+    from airspace_sim.tracking import smoother
+
+    monkeypatch.setattr(smoother, "LAG_WINDOWS", 7)
+    rng = np.random.default_rng(8)
+    T, K, L = 4.0, 24, 3
+    p = presets.imm_ct(T).with_(measurement_sigma=SIGMA)
+    model = p.imm_arguments()
+    Z = straight_then_turn(rng, K, T, rate_deg=2.0, B=2)
+    Z[18:, 1] = np.nan
+    x0 = np.tile([0.0, 150.0, 0.0, 40.0, 0.0], (2, 1))
+    P0 = np.tile(np.diag([1e4, 100.0, 1e4, 100.0, 1e-4]), (2, 1, 1))
+    rec = record(model, Z, x0, P0, p.mu0())
+    n = np.array([K, 18])
+    lagged = smooth(*rec, model, n_steps=n, lag=L)
+    for b in range(2):
+        for k in range(n[b]):
+            upto = min(k + L, n[b] - 1) + 1
+            ref = smooth(*(a[:upto, b : b + 1] for a in rec), model)
+            np.testing.assert_allclose(
+                lagged.x_modes[k, b], ref.x_modes[k, 0], rtol=1e-9, atol=1e-6
+            )
+            np.testing.assert_allclose(lagged.mu[k, b], ref.mu[k, 0], rtol=1e-9, atol=1e-12)
+    filt = smooth(*rec, model, n_steps=n, lag=0)
+    for got, want in zip(filt, rec):
+        np.testing.assert_array_equal(got, want)
+    whole = smooth(*rec, model, n_steps=n)
+    far = smooth(*rec, model, n_steps=n, lag=K)
+    np.testing.assert_allclose(far.x_modes, whole.x_modes, rtol=1e-9, atol=1e-6)
+
+
 def test_bad_arguments_are_user_errors():
     p = presets.imm_ct(4.0)
     model = p.imm_arguments()
@@ -234,5 +269,7 @@ def test_bad_arguments_are_user_errors():
         smooth(mu, x, P, model)
     with pytest.raises(UserError, match="n_steps"):
         smooth(mu, x, np.zeros((3, 1, 3, 5, 5)), model, n_steps=[3, 3])
+    with pytest.raises(UserError, match="lag"):
+        smooth(mu, x, np.zeros((3, 1, 3, 5, 5)), model, lag=-1)
     with pytest.raises(UserError, match="along-track"):
         smooth(mu, x, P, presets.imm_cta(4.0).imm_arguments())

@@ -14,14 +14,12 @@ estimated-rate mode. From step k + 1 back to k, for every pair (j at k, i at k +
   coordinated turn and its Jacobian at ``x^j_{k|k}`` for an estimated-rate one,
   :mod:`.coordinated_turn`);
 - the mode posterior, from the forward mixing weight and how well that prediction meets
-  the smoothed estimate of mode i (the correction Kim's 1994 smoother leaves out):
+  the smoothed estimate of mode i (Barber's correction at the smoothed mean; Kim's 1994
+  smoother leaves it out):
 
-      Pr(s_k = j | s_{k+1} = i, Y_N) ∝ π_ji μ_{k|k}(j) N(x^i_{k+1|N}; x⁻, P⁻ + P^i_{k+1|N}),
+      Pr(s_k = j | s_{k+1} = i, Y_N) ∝ π_ji μ_{k|k}(j) N(x^i_{k+1|N}; x⁻, P⁻),
 
-  Barber's ``Pr(j | x_{k+1}, i, Y_k)`` averaged over the smoothed ``x_{k+1}``, numerator and
-  normaliser apart (at the smoothed mean alone it trusts a mismatched model's predictions
-  too far; ``docs/tracking.md``, "After the fact"); so ``μ_{k|N}(j) = Σ_i Pr(j | i)
-  μ_{k+1|N}(i)`` and ``w_{i|j} = Pr(j | i) μ_{k+1|N}(i) / μ_{k|N}(j)``;
+  so ``μ_{k|N}(j) = Σ_i Pr(j | i) μ_{k+1|N}(i)`` and ``w_{i|j} = Pr(j | i) μ_{k+1|N}(i) / μ_{k|N}(j)``;
 - a Rauch–Tung–Striebel step, ``G = P^j_{k|k} J_iᵀ (P⁻)⁻¹``,
   ``x^{ji} = x^j_{k|k} + G (x^i_{k+1|N} − x⁻)``, ``P^{ji} = P^j_{k|k} + G (P^i_{k+1|N} − P⁻) Gᵀ``,
   merged over i with the weights ``w_{i|j}`` (moment matching).
@@ -30,9 +28,11 @@ With one mode this is the Rauch–Tung–Striebel smoother; with several it appr
 exact smoother (a mixture over every mode sequence) as the IMM approximates the exact filter.
 ``tests/test_smoother.py`` checks both: filterpy's ``rts_smoother``, and the exact posterior
 by enumeration of every mode sequence on short records. Without the correction (Kim's
-smoother), a mode with little process noise carries its smoothed estimate back as a rigid
-straight line, far from a slow turn that its forward filter followed only by mixing
-(``docs/tracking.md``, "After the fact").
+smoother) a mode with little process noise carries its smoothed estimate back as a rigid
+straight line, far from a slow turn its forward filter followed only by mixing. A smoother
+trusts its model over the whole record: modes that cannot fly the record's manoeuvres give
+smoothed positions worse than the filter's (``docs/tracking.md``, "After the fact", also
+for the variants measured).
 
 A mode whose model pins a state component (a known-rate mode sets Ω = ω_j: a zero row of
 ``F_i`` and no process noise on it) has a singular ``P⁻``; the pinned component carries no
@@ -88,8 +88,10 @@ def _predictions(x, P, F, Q, U, estimated, T):
     return xp, Pp, J
 
 
-def smooth(mu, x_modes, P_modes, model: dict, n_steps=None) -> Smoothed:
-    """The fixed-interval IMM smoother's backward pass over a forward IMM's record.
+def smooth(mu, x_modes, P_modes, model: dict, n_steps=None, lag=None) -> Smoothed:
+    """The IMM smoother's backward pass over a forward IMM's record: fixed-interval (every
+    step given the whole record) or, with ``lag``, fixed-lag (step k given the measurements
+    up to k + lag: what a tracker that reports ``lag`` steps late can say).
 
     Parameters
     ----------
@@ -108,11 +110,14 @@ def smooth(mu, x_modes, P_modes, model: dict, n_steps=None) -> Smoothed:
         Each tracker's own record length, for a batch of records of different lengths: a
         tracker's steps from ``n_steps[b]`` on (predictions after its last measurement, NaN
         padding) are returned as given and carry nothing back. None: all K steps.
+    lag : int, optional
+        Fixed-lag smoothing with this many steps of look-ahead (0: the filter); each step
+        costs ``lag`` backward steps. None: fixed-interval.
 
     Returns
     -------
     Smoothed
-        μ_{k|N}, x^j_{k|N}, P^j_{k|N} for every step; the last step's are the filter's.
+        μ, x^j, P^j for every step; the last step's are the filter's.
     """
     if model.get("along_track_acceleration") is not None:
         raise UserError("smooth: models with the along-track acceleration are not supported")
@@ -133,12 +138,18 @@ def smooth(mu, x_modes, P_modes, model: dict, n_steps=None) -> Smoothed:
     estimated = model.get("estimated_turn_rate")
     estimated = np.zeros(M, bool) if estimated is None else np.asarray(estimated, dtype=bool)
     T = float(model["dt"]) if estimated.any() else float("nan")
-
     n_steps = np.full(B, K) if n_steps is None else np.asarray(n_steps)
     if n_steps.shape != (B,):
         raise UserError(f"smooth: n_steps must have shape {(B,)}, got {n_steps.shape}")
-    mu_s, x_s, P_s = mu.copy(), xf.copy(), Pf.copy()
+    if lag is not None and (
+        isinstance(lag, bool) or not isinstance(lag, (int, np.integer)) or lag < 0
+    ):
+        raise UserError(f"smooth: lag must be a non-negative integer of steps, got {lag!r}")
     terms = (F, Q, U, Pi, estimated, T)
+    if lag is not None:
+        return _fixed_lag(mu, xf, Pf, n_steps, int(lag), terms)
+
+    mu_s, x_s, P_s = mu.copy(), xf.copy(), Pf.copy()
     for k in range(K - 2, -1, -1):
         on = np.flatnonzero(k + 1 < n_steps)  # trackers with a smoothed step k + 1
         if on.size == 0:
@@ -146,6 +157,33 @@ def smooth(mu, x_modes, P_modes, model: dict, n_steps=None) -> Smoothed:
         filtered = (mu[k, on], xf[k, on], Pf[k, on])
         after = (mu_s[k + 1, on], x_s[k + 1, on], P_s[k + 1, on])
         mu_s[k, on], x_s[k, on], P_s[k, on] = _backward_step(*filtered, *after, *terms)
+    return Smoothed(mu_s, x_s, P_s)
+
+
+#: Windows (step, tracker) a fixed-lag pass steps back at once (bounds its memory).
+LAG_WINDOWS = 4096
+
+
+def _fixed_lag(mu, xf, Pf, n_steps, lag, terms) -> Smoothed:
+    """Every step's own backward pass, from the filtered estimate ``lag`` steps later (or
+    its record's last step) back to it; the windows (k, b) run side by side."""
+    K, B = mu.shape[:2]
+    kk, bb = np.nonzero(np.arange(K)[:, None] < n_steps[None, :])  # live (step, tracker)
+    end = np.minimum(kk + lag, n_steps[bb] - 1)
+    mu_s, x_s, P_s = mu.copy(), xf.copy(), Pf.copy()
+    for lo in range(0, kk.size, LAG_WINDOWS):
+        k, b, e = kk[lo : lo + LAG_WINDOWS], bb[lo : lo + LAG_WINDOWS], end[lo : lo + LAG_WINDOWS]
+        cur = [mu[e, b], xf[e, b], Pf[e, b]]
+        for t_back in range(lag - 1, -1, -1):
+            on = np.flatnonzero(k + t_back < e)  # windows whose chain reaches k + t_back
+            if on.size == 0:
+                continue
+            t = k[on] + t_back
+            filtered = (mu[t, b[on]], xf[t, b[on]], Pf[t, b[on]])
+            after = [c[on] for c in cur]
+            for c, new in zip(cur, _backward_step(*filtered, *after, *terms)):
+                c[on] = new
+        mu_s[k, b], x_s[k, b], P_s[k, b] = cur
     return Smoothed(mu_s, x_s, P_s)
 
 
@@ -158,11 +196,13 @@ def _backward_step(mu, xf, Pf, mu_next, x_next, P_next, F, Q, U, Pi, estimated, 
     d = np.diagonal(Pp, axis1=-2, axis2=-1)
     Pp_safe = Pp + (d == 0.0)[..., None] * np.eye(n)
     dx = x_next[:, None] - xp  # (R, M_j, M_i, n)
+    # one solve for the gains and the likelihoods: (P⁻)⁻¹ [J P^j, x^i_{k+1|N} − x⁻]
+    sol = np.linalg.solve(Pp_safe, np.concatenate([J @ Pf[:, :, None], dx[..., None]], axis=-1))
+    G = np.swapaxes(sol[..., :n], -1, -2)  # P^j Jᵀ (P⁻)⁻¹
 
-    # Pr(s_k = j | s_{k+1} = i, Y_N) ∝ π_ji μ_{k|k}(j) N(x^i_{k+1|N}; x⁻_ji, P⁻_ji + P^i_{k+1|N})
-    S = Pp_safe + P_next[:, None]
-    sign, logdet = np.linalg.slogdet(S)
-    maha = np.einsum("rjia,rjia->rji", dx, np.linalg.solve(S, dx[..., None])[..., 0])
+    # Pr(s_k = j | s_{k+1} = i, Y_N) ∝ π_ji μ_{k|k}(j) N(x^i_{k+1|N}; x⁻_ji, P⁻_ji)
+    sign, logdet = np.linalg.slogdet(Pp_safe)
+    maha = np.einsum("rjia,rjia->rji", dx, sol[..., n])
     with np.errstate(divide="ignore"):
         log_a = np.log(Pi)[None] + np.log(mu)[:, :, None] - 0.5 * (maha + logdet)
     log_a = np.where(sign > 0, log_a, -np.inf)
@@ -172,7 +212,6 @@ def _backward_step(mu, xf, Pf, mu_next, x_next, P_next, F, Q, U, Pi, estimated, 
     mu_s = joint.sum(axis=2)
     w = joint / np.maximum(mu_s[..., None], np.finfo(float).tiny)  # w_{i|j}
 
-    G = np.swapaxes(np.linalg.solve(Pp_safe, J @ Pf[:, :, None]), -1, -2)  # P^j Jᵀ (P⁻)⁻¹
     x_ji = xf[:, :, None] + np.einsum("rjiac,rjic->rjia", G, dx)
     P_ji = Pf[:, :, None] + G @ (P_next[:, None] - Pp) @ np.swapaxes(G, -1, -2)
     x_s = np.einsum("rji,rjia->rja", w, x_ji)
