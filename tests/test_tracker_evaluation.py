@@ -295,9 +295,10 @@ def test_phases_partition_the_seconds_and_their_errors():
 
 
 def test_tuning_and_floor_scripts_run_on_flights_made_here(tmp_path, monkeypatch, capsys):
-    """docs/benchmarks/tune_tracker.py (with a 4-mode candidate) and tracker_floor.py on
-    four traffic-style JSON files written here: the split, the candidate with another
-    number of modes, and the floors (told more, never worse than the CV filter)."""
+    """docs/benchmarks/tune_tracker.py (with a 4-mode candidate), tracker_floor.py and
+    turn_flags_fixed_lag.py on four traffic-style JSON files written here: the split, the
+    candidate with another number of modes, the floors (told more, never worse than the CV
+    filter), the flags with a delay."""
     pytest.importorskip("airspace_sim.recorded")
     pd = pytest.importorskip("pandas")
     pyproj = pytest.importorskip("pyproj")
@@ -348,6 +349,17 @@ def test_tuning_and_floor_scripts_run_on_flights_made_here(tmp_path, monkeypatch
     assert got["CV"] == 1.0 and got["rate"] < 1.0
     assert got["rate + regime"] <= got["rate"] and got["rate + along-track"] < 1.0
     assert "preset imm-ct" in got
+
+    # turn flags with a delay: more of each turn as the lag grows, the filter at lag 0
+    sys.modules.pop("turn_flags_fixed_lag", None)
+    import turn_flags_fixed_lag
+
+    assert len(tune_tracker.split(tmp_path, "all")) == 4
+    turn_flags_fixed_lag.main([str(tmp_path), "--split", "all", "--period", "4", "--lags", "0,12"])
+    rows = [ln for ln in capsys.readouterr().out.splitlines() if ln.strip().startswith("lag")]
+    turning = [float(ln.split(":")[1].split("%")[0]) for ln in rows]
+    assert [ln.split(":")[0].strip() for ln in rows] == ["lag 0 s", "lag 12 s", "lag inf s"]
+    assert turning[0] < turning[1] <= turning[2] + 1.0 and turning[2] > 80.0
 
 
 def test_tune_tracker_splits_a_collection_file_by_flight(tmp_path, monkeypatch):

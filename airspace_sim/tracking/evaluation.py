@@ -446,11 +446,11 @@ def turn_probabilities(mu, x_modes, P_modes, known, turning_modes, rate):
 SMOOTHER_BATCH_BYTES = 2**28
 
 
-def _smoothed_runs(Z, x0, P0, mu0, model: dict, lengths):
+def _smoothed_runs(Z, x0, P0, mu0, model: dict, lengths, lag=None):
     """The IMM of ``model`` run over the measurements Z (T, F, 2) from step 2 on, then
-    smoothed (:func:`airspace_sim.tracking.smoother.smooth`), in batches of flights of
-    similar length. Yields ``(flights (b,), L, Smoothed)`` with the records of steps
-    ``2..L-1``; ``lengths`` (F,) each flight's number of measured steps."""
+    smoothed (:func:`airspace_sim.tracking.smoother.smooth`; fixed-lag with ``lag`` steps),
+    in batches of flights of similar length. Yields ``(flights (b,), L, Smoothed)`` with the
+    records of steps ``2..L-1``; ``lengths`` (F,) each flight's number of measured steps."""
     from airspace_sim.tracking import IMM
     from airspace_sim.tracking.smoother import smooth
 
@@ -467,7 +467,7 @@ def _smoothed_runs(Z, x0, P0, mu0, model: dict, lengths):
         for k in range(2, L):
             imm.step(Z[k, b])
             mu[k - 2], xm[k - 2], Pm[k - 2] = imm.mu, imm.x_modes, imm.P_modes
-        yield b, L, smooth(mu, xm, Pm, model, n_steps=lengths[b] - 2)
+        yield b, L, smooth(mu, xm, Pm, model, n_steps=lengths[b] - 2, lag=lag)
 
 
 def _right_flags(p_left, p_right, X):
@@ -488,6 +488,30 @@ def _flags(p_left, p_right, X, ev) -> dict:
         turning_flagged=float(right[turning].mean()),
         turning_flagged_wrong_sign=float((flagged & ~right)[turning].mean()),
         straight_flagged=float(flagged[straight].mean()),
+    )
+
+
+def _smoothed_figures(X, Z, ev, imm_run, cv_run, flags) -> dict:
+    """The :class:`Evaluation` fields of the smoothed IMM and CV filter: ``imm_run`` and
+    ``cv_run`` the (x0, P0, mu0, model) of each, ``flags`` the (known, turning_modes, rate) of
+    :func:`turn_probabilities`. Errors are summed batch by batch, not kept per step."""
+    T, F, _ = X.shape
+    lengths = np.isfinite(Z[..., 0]).sum(axis=0)
+    p_left, p_right = np.full((T, F), np.nan), np.full((T, F), np.nan)
+    sse = [0.0, 0.0]
+    for i, run in enumerate((imm_run, cv_run)):
+        for b, L, sm in _smoothed_runs(Z, *run, lengths):
+            e = (sm.x[..., [0, 2]] - X[2:L, b][..., [0, 2]])[ev[2:L, b]]
+            sse[i] += float(np.sum(e**2))
+            if run is imm_run:
+                p_left[2:L, b], p_right[2:L, b] = turn_probabilities(
+                    sm.mu, sm.x_modes, sm.P_modes, *flags
+                )
+    n = max(int(ev.sum()), 1)
+    return dict(
+        pos_imm_smoothed=math.sqrt(sse[0] / n),
+        pos_cv_smoothed=math.sqrt(sse[1] / n),
+        **{f"smoothed_{k}": v for k, v in _flags(p_left, p_right, X, ev).items()},
     )
 
 
@@ -575,22 +599,9 @@ def evaluate(
     cv = cv_est[best]
     smoothed = {}
     if smoother and not p.along_track().any():
-        lengths = np.isfinite(Z[..., 0]).sum(axis=0)
-        x_imm, x_cv = np.full((T, F, 4), np.nan), np.full((T, F, 4), np.nan)
-        s_left, s_right = np.full((T, F), np.nan), np.full((T, F), np.nan)
-        args = p.imm_arguments()
-        for b, L, sm in _smoothed_runs(Z, x0, P0, mu0, args, lengths):
-            x_imm[2:L, b] = sm.x[..., :4]
-            s_left[2:L, b], s_right[2:L, b] = turn_probabilities(
-                sm.mu, sm.x_modes, sm.P_modes, known, turning_modes, flag_rate
-            )
-        for b, L, sm in _smoothed_runs(Z, x0[:, :5], P0[:, :5, :5], [1.0], cv_model(best), lengths):
-            x_cv[2:L, b] = sm.x[..., :4]
-        smoothed = dict(
-            pos_imm_smoothed=_rmse((x_imm - X[..., :4])[ev][:, [0, 2]]),
-            pos_cv_smoothed=_rmse((x_cv - X[..., :4])[ev][:, [0, 2]]),
-            **{f"smoothed_{k}": v for k, v in _flags(s_left, s_right, X, ev).items()},
-        )
+        flags = (known, turning_modes, flag_rate)
+        cv_run = (x0[:, :5], P0[:, :5, :5], [1.0], cv_model(best))
+        smoothed = _smoothed_figures(X, Z, ev, (x0, P0, mu0, p.imm_arguments()), cv_run, flags)
 
     omega = np.degrees(X[..., 4])
     turning = ev & (np.abs(omega) >= TURNING_DEG_S)

@@ -45,7 +45,7 @@ def split_arguments(doc: str, period: bool = True) -> argparse.ArgumentParser:
     :data:`SIGMA_BY_PERIOD`)."""
     ap = argparse.ArgumentParser(description=doc.splitlines()[0])
     ap.add_argument("directory", type=Path)
-    ap.add_argument("--split", choices=("train", "test"), default="train")
+    ap.add_argument("--split", choices=("train", "test", "all"), default="train")
     if period:
         ap.add_argument("--period", type=float, default=4.0)
     return ap
@@ -55,10 +55,12 @@ def split(directory: Path, half: str) -> list:
     """The half of the flights: of a folder of samples, the files in name order at even
     (train) or odd (test) positions; of one file (a collection such as the extracted
     ``collections/switzerland.json.gz``), ``[(file, half)]``: its flights at even or odd
-    positions (:func:`flights_of`)."""
+    positions (:func:`flights_of`). ``all``: every file, or the file whole."""
     if directory.is_file():
-        return [(directory, half)]
+        return [directory] if half == "all" else [(directory, half)]
     files = sorted(directory.glob("*.json.gz"))
+    if half == "all":
+        return files
     return files[0::2] if half == "train" else files[1::2]
 
 
