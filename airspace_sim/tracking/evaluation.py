@@ -443,7 +443,7 @@ def turn_probabilities(mu, x_modes, P_modes, known, turning_modes, rate):
 
 #: Memory (bytes) a batch of flights' forward record may take when smoothing
 #: (K·B·M·n² covariances; flights are batched by length under it).
-SMOOTHER_BATCH_BYTES = 2**28
+SMOOTHER_BATCH_BYTES = 2**26
 
 
 def _smoothed_runs(Z, x0, P0, mu0, model: dict, lengths, lag=None):
