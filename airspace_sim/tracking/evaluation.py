@@ -34,7 +34,10 @@ IMM / CV ratio (``docs/tracking.md``, ``docs/benchmarks/tracker_floor.py``). The
 flags are also broken down by the time since the turn began (:attr:`Evaluation.onset`):
 how much of the shortfall is detection delay; and both filters' position errors by phase
 (:attr:`Evaluation.phases`: in a turn or after one, by the seconds since it began or ended):
-where the IMM gains on the CV filter and where it loses.
+where the IMM gains on the CV filter and where it loses. After the fact
+(``evaluate(smoother=True)``, the default): both filters smoothed over each whole flight
+(:func:`airspace_sim.tracking.smoother.smooth`), their position RMSEs and the smoothed IMM's
+turn flags.
 
 Flights are given as arrays (times in seconds, east/north positions in metres in a local
 frame), so any reader can feed this module; the ``evaluate-tracker`` command reads files.
@@ -542,7 +545,8 @@ def evaluate(
     ``smoother``: also smooth both filters over each whole flight (the IMM with
     :func:`~airspace_sim.tracking.smoother.smooth`, the best CV filter with the same, one
     mode: the RTS smoother) and score the smoothed turn flags and positions (always without
-    a gate): the turns a recorded flight holds, labelled after the fact.
+    a gate): the turns a recorded flight holds, labelled after the fact. Not for models with
+    the along-track acceleration (their smoothed fields stay None).
     """
     from airspace_sim.tracking import IMM
 

@@ -10,7 +10,9 @@ bent the track beyond the noise; a tracker that may report ``lag`` seconds late 
 measurements up to then (``tracking.smooth(..., lag=steps)``). Printed per lag: turning
 seconds flagged with the right sign / with the wrong sign / straight seconds flagged (the
 flag rule and the seconds of ``evaluate``), and the position RMSE. Lag 0 is the filter,
-"inf" the fixed-interval smoother. Each lag of L steps costs L backward passes.
+"inf" the fixed-interval smoother. Each lag of L steps costs L backward passes. First, how
+long the turns are: for every turning second (|ω| ≥ 1 °/s), the duration and heading change
+of the turn it belongs to (its run of same-sign |ω| ≥ 0.5 °/s), percentiles.
 """
 
 from __future__ import annotations
@@ -27,6 +29,21 @@ from tune_tracker import SIGMA_BY_PERIOD, preset, split, split_arguments, truths
 
 from airspace_sim.dynamics import models  # noqa: E402
 from airspace_sim.tracking import evaluation as E  # noqa: E402
+
+
+def turn_extents(truths, period):
+    """For every turning step of ``truths``: (duration s, |heading change| deg) of its turn,
+    the run of same-sign |ω| ≥ :data:`~airspace_sim.tracking.evaluation.ONSET_DEG_S` around it."""
+    out = []
+    for tr in truths:
+        w = np.degrees(tr.state[:, 4])
+        side = np.where(np.abs(w) >= E.ONSET_DEG_S, np.sign(w), 0.0)
+        edges = np.flatnonzero(np.diff(side) != 0) + 1
+        for run, ws in zip(np.split(side, edges), np.split(w, edges)):
+            if run[0] != 0:
+                n_turning = int(np.count_nonzero(np.abs(ws) >= E.TURNING_DEG_S))
+                out += [(ws.size * period, abs(ws.sum()) * period)] * n_turning
+    return np.array(out).reshape(-1, 2)
 
 
 def flags_at_lag(p, X, Z, period, lag_steps):
@@ -61,6 +78,11 @@ def main(argv=None) -> None:
     X = E._stack(truths)
     Z = E.measurements(X, sigma, 0)
     ev = E._evaluated(X, a.period)
+    ext = turn_extents(truths, a.period)
+    q = (10, 25, 50, 75, 90)
+    print(f"turning seconds' turns, percentiles {q}: duration s "
+          f"{np.percentile(ext[:, 0], q).round(0).tolist()}, heading change deg "
+          f"{np.percentile(ext[:, 1], q).round(0).tolist()}")  # fmt: skip
     print(f"{a.split} {a.period:g} s, sigma {sigma:g} m, {a.preset}: lag s: turning right sign"
           " / wrong sign / straight flagged; position RMSE", flush=True)  # fmt: skip
     for lag_s in [float(v) for v in a.lags.split(",")] + [math.inf]:
