@@ -20,6 +20,8 @@ import pytest
 
 filterpy = pytest.importorskip("filterpy")
 from filterpy.kalman import ExtendedKalmanFilter, KalmanFilter  # noqa: E402
+from test_imm_ct import f_ct  # noqa: E402  (the test's own coordinated turn)
+from test_imm_ct import jac_complex_step as jac  # noqa: E402
 
 from airspace_sim.dynamics import models, presets  # noqa: E402
 from airspace_sim.errors import UserError  # noqa: E402
@@ -53,13 +55,20 @@ def straight_then_turn(rng, K, T, rate_deg=3.0, B=1):
     return np.array(zs)
 
 
+def cv_model(sigma_a, T):
+    """A one-mode constant-velocity model's IMM arguments."""
+    F, Q = models.constant_velocity(T), models.white_noise_acceleration(sigma_a, T, 1e-3)
+    return dict(transitions=F[None], process_noise=Q[None],
+                measurement_matrix=models.position_measurement_matrix(),
+                measurement_noise=models.measurement_noise(SIGMA), transition_matrix=[[1.0]])  # fmt: skip
+
+
 def test_one_linear_mode_is_the_rts_smoother():
     rng = np.random.default_rng(1)
     T, K = 4.0, 40
-    F, Q = models.constant_velocity(T), models.white_noise_acceleration(2.0, T, 1e-3)
-    H, R = models.position_measurement_matrix(), models.measurement_noise(SIGMA)
-    model = dict(transitions=F[None], process_noise=Q[None], measurement_matrix=H,
-                 measurement_noise=R, transition_matrix=[[1.0]])  # fmt: skip
+    model = cv_model(2.0, T)
+    F, Q = model["transitions"][0], model["process_noise"][0]
+    H, R = model["measurement_matrix"], model["measurement_noise"]
     Z = straight_then_turn(rng, K, T)
     x0, P0 = np.array([0.0, 150.0, 0.0, 40.0, 0.0]), np.diag([1e4, 100.0, 1e4, 100.0, 1e-4])
     sm = smooth(*record(model, Z, x0[None], P0[None], [1.0]), model)
@@ -70,25 +79,6 @@ def test_one_linear_mode_is_the_rts_smoother():
     np.testing.assert_allclose(sm.x[:, 0], xs, rtol=1e-9, atol=1e-7)
     np.testing.assert_allclose(sm.P_modes[:, 0, 0], Ps, rtol=1e-9, atol=1e-7)
     np.testing.assert_array_equal(sm.mu, 1.0)
-
-
-def f_ct(x, T):
-    """Coordinated turn at the state's own rate (complex-safe, for complex steps)."""
-    px, vx, py, vy, w = x
-    s, c = np.sin(w * T) / w, (1 - np.cos(w * T)) / w
-    return np.array(
-        [px + s * vx - c * vy, np.cos(w * T) * vx - np.sin(w * T) * vy, py + c * vx + s * vy,
-         np.sin(w * T) * vx + np.cos(w * T) * vy, w]
-    )  # fmt: skip
-
-
-def jac(x, T, h=1e-30):
-    J = np.empty((5, 5))
-    for k in range(5):
-        e = np.array(x, dtype=complex)
-        e[k] += 1j * h
-        J[:, k] = f_ct(e, T).imag / h
-    return J
 
 
 def test_one_estimated_rate_mode_is_the_extended_rts_smoother():
@@ -130,11 +120,9 @@ def test_one_estimated_rate_mode_is_the_extended_rts_smoother():
 def test_identical_modes_give_the_rts_smoother_whatever_their_probabilities():
     rng = np.random.default_rng(3)
     T, K = 4.0, 30
-    F, Q = models.constant_velocity(T), models.white_noise_acceleration(1.5, T, 1e-3)
-    H, R = models.position_measurement_matrix(), models.measurement_noise(SIGMA)
-    one = dict(transitions=F[None], process_noise=Q[None], measurement_matrix=H,
-               measurement_noise=R, transition_matrix=[[1.0]])  # fmt: skip
-    three = dict(one, transitions=np.repeat(F[None], 3, 0), process_noise=np.repeat(Q[None], 3, 0),
+    one = cv_model(1.5, T)
+    three = dict(one, transitions=np.repeat(one["transitions"], 3, 0),
+                 process_noise=np.repeat(one["process_noise"], 3, 0),
                  transition_matrix=[[0.8, 0.15, 0.05], [0.1, 0.7, 0.2], [0.3, 0.3, 0.4]])  # fmt: skip
     Z = straight_then_turn(rng, K, T, B=2)
     x0 = np.tile([0.0, 150.0, 0.0, 40.0, 0.0], (2, 1))

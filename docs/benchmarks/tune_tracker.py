@@ -83,6 +83,19 @@ def truths_of(files, period):
     return out
 
 
+def measured(a):
+    """What the flag scripts start from, for ``a.directory``, ``a.split``, ``a.period`` and
+    ``a.preset``: the truths, the preset's tracker model at that setting, the stacked truths
+    X (T, F, 5), ``evaluate``'s measurements Z (seed 0) and evaluated steps (T, F)."""
+    from airspace_sim.tracking import evaluation as E
+
+    sigma = SIGMA_BY_PERIOD[a.period]
+    truths = truths_of(split(a.directory, a.split), a.period)
+    p = preset(a.preset).with_(dt=a.period, measurement_sigma=sigma).filter_model()
+    X = E._stack(truths)
+    return truths, p, X, E.measurements(X, sigma, 0), E._evaluated(X, a.period)
+
+
 #: Tracker models measured here that are not in presets.PRESETS (no scenario name).
 UNLISTED = {"imm-cta": presets.imm_cta}
 

@@ -25,7 +25,7 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from tune_tracker import SIGMA_BY_PERIOD, preset, split, split_arguments, truths_of  # noqa: E402
+from tune_tracker import measured, split_arguments  # noqa: E402
 
 from airspace_sim.dynamics import models  # noqa: E402
 from airspace_sim.tracking import evaluation as E  # noqa: E402
@@ -72,12 +72,8 @@ def main(argv=None) -> None:
     ap.add_argument("--preset", default="imm-ct")
     ap.add_argument("--lags", default="0,5,10,15,20,30", help="seconds, comma-separated")
     a = ap.parse_args(argv)
-    sigma = SIGMA_BY_PERIOD[a.period]
-    truths = truths_of(split(a.directory, a.split), a.period)
-    p = preset(a.preset).with_(dt=a.period, measurement_sigma=sigma).filter_model()
-    X = E._stack(truths)
-    Z = E.measurements(X, sigma, 0)
-    ev = E._evaluated(X, a.period)
+    truths, p, X, Z, ev = measured(a)
+    sigma = p.measurement_sigma
     ext = turn_extents(truths, a.period)
     q = (10, 25, 50, 75, 90)
     print(f"turning seconds' turns, percentiles {q}: duration s "

@@ -32,7 +32,7 @@ import sys
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from tune_tracker import SIGMA_BY_PERIOD, preset, split, split_arguments, truths_of  # noqa: E402
+from tune_tracker import measured, split_arguments  # noqa: E402
 
 from airspace_sim.dynamics import models  # noqa: E402
 from airspace_sim.tracking import IMM  # noqa: E402
@@ -80,12 +80,8 @@ def main(argv=None) -> None:
     ap = split_arguments(__doc__)
     ap.add_argument("--preset", default="imm-ct")
     a = ap.parse_args(argv)
-    sigma = SIGMA_BY_PERIOD[a.period]
-    truths = truths_of(split(a.directory, a.split), a.period)
-    p = preset(a.preset).with_(dt=a.period, measurement_sigma=sigma).filter_model()
-    X = E._stack(truths)
-    Z = E.measurements(X, sigma, 0)
-    ev = E._evaluated(X, a.period)
+    _, p, X, Z, ev = measured(a)
+    sigma = p.measurement_sigma
     left_f, right_f = turn_probabilities(p, Z, a.period)
     n = np.isfinite(Z[..., 0]).sum(axis=0)
     Zr, index = reversed_in_time(Z, n)
