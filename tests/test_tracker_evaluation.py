@@ -340,6 +340,10 @@ def test_tuning_and_floor_scripts_run_on_flights_made_here(tmp_path, monkeypatch
     assert len(lines) == 2 and all(ln.startswith("train 4s imm-ct") for ln in lines)
     ratios = [float(ln.split("ratio ")[1].split()[0]) for ln in lines]
     assert all(0.3 < r < 1.0 for r in ratios)  # turns the CV filter does not follow
+    assert all("smoothed turning" in ln for ln in lines)
+    tune_tracker.main([str(tmp_path), "--period", "4", "--preset", "imm-cta"])
+    (line,) = capsys.readouterr().out.strip().splitlines()
+    assert "ratio" in line and "smoothed" not in line  # no smoother for along-track models
     with pytest.raises(SystemExit, match="needs sojourn_s"):
         tune_tracker.candidate(presets.get("imm-ct"), {"turn_rates": [0, 2, 2, 0]})
     tracker_floor.main([str(tmp_path), "--split", "test", "--period", "4", "--preset", "imm-ct"])

@@ -11,8 +11,9 @@ matched IMM (mode names included) that can step with any time since the last ste
 - gating diagnostics: ``imm.gated`` (B,) says which finite measurements were rejected,
   ``imm.nis`` their NIS and :func:`gate_threshold` the d² a probability gives;
 - :func:`chi2_band`, :func:`nees`, :func:`nis`: consistency statistics;
-- :func:`smooth`: the fixed-interval IMM smoother over a forward run's record (states and
-  mode probabilities given the whole record: labelling recorded flights after the fact);
+- :func:`smooth`: the IMM smoother over a forward run's record, fixed-interval (states and
+  mode probabilities given the whole record: labelling recorded flights after the fact) or
+  fixed-lag (given a few steps more: what a tracker that reports late can say);
 - :mod:`.coordinated_turn`: the estimated-rate (EKF) mode; :mod:`.evaluation`: trackers
   measured on recorded flights.
 """

@@ -152,8 +152,13 @@ def main(argv=None) -> None:
             f"(IMM {ev.pos_imm:.1f} m, CV {ev.pos_cv:.1f} m @ {ev.cv_sigma:g}) turning "
             f"{100 * ev.turning_flagged:.1f}% straight {100 * ev.straight_flagged:.2f}% "
             f"rate-flag {100 * ev.turning_rate_flagged:.1f}/{100 * ev.straight_rate_flagged:.2f}% "
-            f"NIS {ev.nis:.2f}; smoothed turning {100 * ev.smoothed_turning_flagged:.1f}% "
-            f"straight {100 * ev.smoothed_straight_flagged:.2f}%",
+            f"NIS {ev.nis:.2f}"
+            + (
+                ""
+                if ev.smoothed_turning_flagged is None  # no smoother for along-track models
+                else f"; smoothed turning {100 * ev.smoothed_turning_flagged:.1f}% "
+                f"straight {100 * ev.smoothed_straight_flagged:.2f}%"
+            ),
             flush=True,
         )
 
