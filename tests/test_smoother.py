@@ -42,17 +42,19 @@ def record(model, Z, x0, P0, mu0):
     return np.array(mus), np.array(xs), np.array(Ps)
 
 
-def straight_then_turn(rng, K, T, rate_deg=3.0, B=1):
-    """Measurements (K, B, 2) of an aircraft at 150 m/s that turns at ``rate_deg`` halfway."""
+def straight_then_turn(rng, K, T, rate_deg=3.0, B=1, with_path=False):
+    """Measurements (K, B, 2) of an aircraft at 150 m/s that turns at ``rate_deg`` halfway
+    (and, ``with_path``, its positions (K, 2))."""
     x = np.array([0.0, 150.0, 0.0, 40.0, 0.0])
-    zs = []
+    zs, path = [], []
     for k in range(K):
         w = math.radians(rate_deg) if k >= K // 2 else 0.0
         h, v = math.atan2(x[3], x[1]) + w * T, math.hypot(x[1], x[3])
         x = x + [T * x[1], 0.0, T * x[3], 0.0, 0.0]
         x[1], x[3] = v * math.cos(h), v * math.sin(h)
         zs.append(x[[0, 2]] + rng.normal(0.0, SIGMA, (B, 2)))
-    return np.array(zs)
+        path.append(x[[0, 2]])
+    return (np.array(zs), np.array(path)) if with_path else np.array(zs)
 
 
 def cv_model(sigma_a, T):
@@ -275,6 +277,26 @@ def test_fixed_lag_is_the_fixed_interval_smoother_of_the_record_so_far(monkeypat
     whole = smooth(*rec, model, n_steps=n)
     far = smooth(*rec, model, n_steps=n, lag=K)
     np.testing.assert_allclose(far.x_modes, whole.x_modes, rtol=1e-9, atol=1e-6)
+
+
+def test_missed_detections_smooth_through():
+    """Steps without a measurement (NaN rows: the filter only predicts) smooth like any other:
+    finite, probabilities that sum to one, and closer to the path than the filter."""
+    rng = np.random.default_rng(9)
+    T, K, B = 4.0, 60, 8
+    p = presets.imm_ct(T).with_(measurement_sigma=SIGMA)
+    model = p.imm_arguments()
+    Z, path = straight_then_turn(rng, K, T, rate_deg=2.0, B=B, with_path=True)
+    Z[rng.random((K, B)) < 0.2] = np.nan
+    x0 = np.tile([0.0, 150.0, 0.0, 40.0, 0.0], (B, 1))
+    P0 = np.tile(np.diag([1e4, 100.0, 1e4, 100.0, 1e-4]), (B, 1, 1))
+    rec = record(model, Z, x0, P0, p.mu0())
+    sm = smooth(*rec, model)
+    assert np.all(np.isfinite(sm.x)) and np.allclose(sm.mu.sum(axis=2), 1.0)
+    filtered = np.einsum("kbm,kbmn->kbn", rec[0], rec[1])
+    err_f = np.sqrt(np.mean(np.sum((filtered[5:, :, [0, 2]] - path[5:, None]) ** 2, axis=-1)))
+    err_s = np.sqrt(np.mean(np.sum((sm.x[5:, :, [0, 2]] - path[5:, None]) ** 2, axis=-1)))
+    assert err_s < 0.8 * err_f
 
 
 def test_bad_arguments_are_user_errors():

@@ -211,6 +211,9 @@ def _backward_step(mu, xf, Pf, mu_next, x_next, P_next, F, Q, U, Pi, estimated, 
     a = np.exp(log_a - log_a.max(axis=1, keepdims=True))
     a = np.nan_to_num(a / a.sum(axis=1, keepdims=True))  # over j, for each i
     joint = a * mu_next[:, None, :]  # Pr(s_k = j, s_{k+1} = i | Y_N)
+    # a mode i no j can reach (every pair impossible) would lose its probability: renormalise
+    total = joint.sum(axis=(1, 2))[:, None, None]
+    joint = np.where(total > 0, joint / np.where(total > 0, total, 1.0), Pi[None] * mu[..., None])
     mu_s = joint.sum(axis=2)
     w = joint / np.maximum(mu_s[..., None], np.finfo(float).tiny)  # w_{i|j}
 
