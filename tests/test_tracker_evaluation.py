@@ -126,6 +126,25 @@ def test_smoothed_flags_and_positions_after_the_fact(name, monkeypatch):
     assert ev.pos_cv_smoothed == pytest.approx(evaluation._rmse(np.concatenate(err)), rel=1e-6)
 
 
+def test_fixed_lag_figures_run_from_the_filter_to_the_whole_flight():
+    """Lag 0 is the filter (both the IMM's and the CV filter's figures); a lag past the
+    flight's end is the fixed-interval smoother."""
+    t, X = flight(LEGS[:3], dt=4.0)  # a truth on the 4 s grid
+    truths = [evaluation.Truth("f", t, X)]
+    kw = dict(seed=2, cv_sigmas=(2.0, 8.0))
+    whole = evaluation.evaluate(truths, presets.get("imm-ct"), 50.0, 4.0, **kw)
+    zero = evaluation.evaluate(truths, presets.get("imm-ct"), 50.0, 4.0, smoother_lag_s=0.0, **kw)
+    far = evaluation.evaluate(truths, presets.get("imm-ct"), 50.0, 4.0, smoother_lag_s=1e4, **kw)
+    assert zero.pos_imm_smoothed == pytest.approx(zero.pos_imm, rel=1e-9)
+    assert zero.pos_cv_smoothed == pytest.approx(zero.pos_cv, rel=1e-9)
+    assert zero.smoothed_turning_flagged == zero.turning_flagged
+    assert zero.smoothed_straight_flagged == zero.straight_flagged
+    assert far.pos_imm_smoothed == pytest.approx(whole.pos_imm_smoothed, rel=1e-9)
+    assert far.smoothed_turning_flagged == whole.smoothed_turning_flagged
+    assert zero.smoother_lag_s == 0.0 and whole.smoother_lag_s is None
+    assert any("0 s late" in line for line in zero.lines())
+
+
 def test_without_the_smoother_there_are_no_smoothed_figures():
     t, X = flight(LEGS[:2])
     ev = evaluation.evaluate([evaluation.Truth("f", t, X)], presets.get("realistic"), 50.0, 1.0,
@@ -171,6 +190,12 @@ def test_evaluate_tracker_command_on_a_recorded_file(tmp_path, capsys):
 
     rows = json.loads(out.read_text())
     assert [r["period_s"] for r in rows] == [1.0, 4.0] and all(r["n_flights"] == 1 for r in rows)
+    assert "after the fact" in text and all(r["smoother_lag_s"] is None for r in rows)
+    assert cli.main(["evaluate-tracker", str(tmp_path / "f.csv"), "--lag", "12"]) == 0
+    assert "12 s late (fixed-lag smoothers)" in capsys.readouterr().out
+    assert cli.main(["evaluate-tracker", str(tmp_path / "f.csv"), "--lag", "-1"]) != 0
+    err = capsys.readouterr().err
+    assert "lag must be >= 0 s" in err and "Traceback" not in err
 
 
 def filterpy_known_motion(truths, sigma, T, sa, accel, seed):

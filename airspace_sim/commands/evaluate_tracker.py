@@ -40,6 +40,11 @@ def add_arguments(parser) -> None:
         "smoothed, turns flagged and positions scored)",
     )  # fmt: skip
     parser.add_argument(
+        "--lag", type=float, default=None, metavar="S",
+        help="smooth with S seconds of look-ahead (fixed-lag: the flags of a tracker that "
+        "reports S s late) instead of over each whole flight",
+    )  # fmt: skip
+    parser.add_argument(
         "--json", metavar="PATH", default=None, help="also write the figures as JSON to PATH"
     )
 
@@ -85,7 +90,8 @@ def run(args) -> int:
                 speed = None  # no ground speed on some rows: keep the recorded times
             truths += resample(f.id, f.t_s, f.x_m, f.y_m, period, speed_mps=speed)
         for p in tqdm(chosen, desc=f"sigma={sigma:g} m, {period:g} s", leave=False):
-            ev = evaluate(truths, p, sigma, period, seed=args.seed, smoother=not args.no_smoother)
+            ev = evaluate(truths, p, sigma, period, seed=args.seed, smoother=not args.no_smoother,
+                          smoother_lag_s=args.lag)  # fmt: skip
             tqdm.write("\n".join(ev.lines()))
             results.append(ev)
     if args.json:

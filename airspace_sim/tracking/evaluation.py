@@ -208,6 +208,8 @@ class Evaluation:
     smoothed_turning_flagged: float | None = None
     smoothed_turning_flagged_wrong_sign: float | None = None
     smoothed_straight_flagged: float | None = None
+    #: the smoothers' look-ahead (s): None for the whole flight, else fixed-lag
+    smoother_lag_s: float | None = None
 
     def to_dict(self) -> dict:
         """The figures as JSON-ready Python values."""
@@ -256,11 +258,16 @@ class Evaluation:
             ),
         ] + self._smoothed_lines()
 
+    def _smoothed_label(self) -> str:
+        if self.smoother_lag_s is None:
+            return "after the fact (fixed-interval smoothers)"
+        return f"{self.smoother_lag_s:g} s late (fixed-lag smoothers)"
+
     def _smoothed_lines(self) -> list[str]:
         if self.pos_imm_smoothed is None:
             return []
         return [
-            f"  after the fact (fixed-interval smoothers): position RMSE IMM "
+            f"  {self._smoothed_label()}: position RMSE IMM "
             f"{self.pos_imm_smoothed:.1f} m, CV {self.pos_cv_smoothed:.1f} m (ratio "
             f"{self.pos_imm_smoothed / self.pos_cv_smoothed:.3f}); turning seconds flagged "
             f"{100 * self.smoothed_turning_flagged:.1f}% (wrong sign "
@@ -494,16 +501,17 @@ def _flags(p_left, p_right, X, ev) -> dict:
     )
 
 
-def _smoothed_figures(X, Z, ev, imm_run, cv_run, flags) -> dict:
+def _smoothed_figures(X, Z, ev, imm_run, cv_run, flags, lag=None) -> dict:
     """The :class:`Evaluation` fields of the smoothed IMM and CV filter: ``imm_run`` and
     ``cv_run`` the (x0, P0, mu0, model) of each, ``flags`` the (known, turning_modes, rate) of
-    :func:`turn_probabilities`. Errors are summed batch by batch, not kept per step."""
+    :func:`turn_probabilities`, ``lag`` steps of fixed-lag (None: fixed-interval). Errors are
+    summed batch by batch, not kept per step."""
     T, F, _ = X.shape
     lengths = np.isfinite(Z[..., 0]).sum(axis=0)
     p_left, p_right = np.full((T, F), np.nan), np.full((T, F), np.nan)
     sse = [0.0, 0.0]
     for i, run in enumerate((imm_run, cv_run)):
-        for b, L, sm in _smoothed_runs(Z, *run, lengths):
+        for b, L, sm in _smoothed_runs(Z, *run, lengths, lag=lag):
             e = (sm.x[..., [0, 2]] - X[2:L, b][..., [0, 2]])[ev[2:L, b]]
             sse[i] += float(np.sum(e**2))
             if run is imm_run:
@@ -527,6 +535,7 @@ def evaluate(
     cv_sigmas=CV_SIGMA_GRID,
     gate_probability: float = 1.0,
     smoother: bool = True,
+    smoother_lag_s: float | None = None,
 ) -> Evaluation:
     """Run the preset's IMM and the CV grid on noisy measurements of ``truths``.
 
@@ -545,8 +554,10 @@ def evaluate(
     ``smoother``: also smooth both filters over each whole flight (the IMM with
     :func:`~airspace_sim.tracking.smoother.smooth`, the best CV filter with the same, one
     mode: the RTS smoother) and score the smoothed turn flags and positions (always without
-    a gate): the turns a recorded flight holds, labelled after the fact. Not for models with
-    the along-track acceleration (their smoothed fields stay None).
+    a gate): the turns a recorded flight holds, labelled after the fact. ``smoother_lag_s``:
+    fixed-lag smoothers instead, each step given the measurements up to that many seconds
+    later (rounded to whole steps): the flags of a tracker that reports that late. Not for
+    models with the along-track acceleration (their smoothed fields stay None).
     """
     from airspace_sim.tracking import IMM
 
@@ -603,9 +614,16 @@ def evaluate(
     cv = cv_est[best]
     smoothed = {}
     if smoother and not p.along_track().any():
+        if smoother_lag_s is not None and not (
+            math.isfinite(smoother_lag_s) and smoother_lag_s >= 0
+        ):
+            raise UserError(f"evaluate: smoother lag must be >= 0 s, got {smoother_lag_s!r}")
+        lag = None if smoother_lag_s is None else int(round(smoother_lag_s / period_s))
         flags = (known, turning_modes, flag_rate)
         cv_run = (x0[:, :5], P0[:, :5, :5], [1.0], cv_model(best))
-        smoothed = _smoothed_figures(X, Z, ev, (x0, P0, mu0, p.imm_arguments()), cv_run, flags)
+        imm_run = (x0, P0, mu0, p.imm_arguments())
+        smoothed = _smoothed_figures(X, Z, ev, imm_run, cv_run, flags, lag)
+        smoothed["smoother_lag_s"] = None if lag is None else lag * period_s
 
     omega = np.degrees(X[..., 4])
     turning = ev & (np.abs(omega) >= TURNING_DEG_S)
