@@ -35,9 +35,9 @@ flags are also broken down by the time since the turn began (:attr:`Evaluation.o
 how much of the shortfall is detection delay; and both filters' position errors by phase
 (:attr:`Evaluation.phases`: in a turn or after one, by the seconds since it began or ended):
 where the IMM gains on the CV filter and where it loses. After the fact
-(``evaluate(smoother=True)``, the default): both filters smoothed over each whole flight
-(:func:`airspace_sim.tracking.smoother.smooth`), their position RMSEs and the smoothed IMM's
-turn flags.
+(``evaluate(smoother=True)``, the default): both filters smoothed over each whole flight, or
+with a fixed lag (``smoother_lag_s``; :func:`airspace_sim.tracking.smoother.smooth`), their
+position RMSEs and the smoothed IMM's turn flags.
 
 Flights are given as arrays (times in seconds, east/north positions in metres in a local
 frame), so any reader can feed this module; the ``evaluate-tracker`` command reads files.
@@ -200,9 +200,9 @@ class Evaluation:
     #: share of the evaluated seconds, IMM position RMSE m, best CV position RMSE m)
     phases: list = field(default_factory=list)
     #: after the fact (``evaluate(smoother=True)``; None otherwise or for a model the
-    #: smoother does not take): both filters smoothed over each whole flight, position RMSE
-    #: of the smoothed IMM and of the RTS-smoothed best CV filter, and the smoothed IMM's
-    #: turn flags scored as the filter's
+    #: smoother does not take): both filters smoothed over each whole flight (or with
+    #: ``smoother_lag_s`` of look-ahead), position RMSE of the smoothed IMM and of the
+    #: RTS-smoothed best CV filter, and the smoothed IMM's turn flags scored as the filter's
     pos_imm_smoothed: float | None = None
     pos_cv_smoothed: float | None = None
     smoothed_turning_flagged: float | None = None
