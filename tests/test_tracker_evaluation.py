@@ -92,8 +92,7 @@ def test_smoothed_flags_and_positions_after_the_fact(name, monkeypatch):
     straight seconds, and follow the path closer; the CV one is the RTS smoother of the best
     CV filter (filterpy's, flight by flight), also when flights of different lengths run
     in separate batches."""
-    from filterpy.kalman import KalmanFilter
-
+    KalmanFilter = pytest.importorskip("filterpy.kalman").KalmanFilter
     from airspace_sim.dynamics import models
 
     monkeypatch.setattr(evaluation, "SMOOTHER_BATCH_BYTES", 1)  # a batch per flight
@@ -379,7 +378,7 @@ def test_tuning_and_floor_scripts_run_on_flights_made_here(tmp_path, monkeypatch
     assert got["rate + regime"] <= got["rate"] and got["rate + along-track"] < 1.0
     assert "preset imm-ct" in got
 
-    # turn flags with a delay: more of each turn as the lag grows, the filter at lag 0
+    # turn flags with a delay: more of each turn as the lag grows
     sys.modules.pop("turn_flags_fixed_lag", None)
     import turn_flags_fixed_lag
 
