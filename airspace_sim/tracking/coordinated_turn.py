@@ -50,13 +50,20 @@ def ct_terms(omega, T):
     return s, c, ds, dc, co, si
 
 
-_ct_terms = np.vectorize(lambda w, T: ct_terms(w, T), otypes=[float] * 6)
+@njit(cache=True, error_model="numpy")
+def _ct_terms(omega, T):
+    """:func:`ct_terms` for every rate of ``omega`` (R,): six (R,) arrays, compiled (the
+    smoother calls this for every tracker and mode at every step)."""
+    out = np.empty((6, omega.size))
+    for r in range(omega.size):
+        out[0, r], out[1, r], out[2, r], out[3, r], out[4, r], out[5, r] = ct_terms(omega[r], T)
+    return out[0], out[1], out[2], out[3], out[4], out[5]
 
 
 def transition(x, T: float):
     """``f(x)`` and its Jacobian for states ``x`` (R, 5) over ``T`` s: (R, 5), (R, 5, 5)."""
     x = np.asarray(x, dtype=float)
-    s, c, ds, dc, co, si = _ct_terms(x[:, 4], T)
+    s, c, ds, dc, co, si = _ct_terms(np.ascontiguousarray(x[:, 4]), float(T))
     vx, vy = x[:, 1], x[:, 3]
     fx = np.stack(
         [x[:, 0] + s * vx - c * vy, co * vx - si * vy, x[:, 2] + c * vx + s * vy,

@@ -84,10 +84,10 @@ def _predictions(x, P, F, Q, U, estimated, T):
     B, M, n = x.shape
     J = np.broadcast_to(F[None, None], (B, M, M, n, n)).copy()
     xp = np.einsum("ikl,bjl->bjik", F, x) + U[None, None]
-    for i in np.flatnonzero(estimated):
-        fx, Ji = coordinated_turn.transition(x.reshape(B * M, n), T)
-        xp[:, :, i] = fx.reshape(B, M, n)
-        J[:, :, i] = Ji.reshape(B, M, n, n)
+    if estimated.any():  # every estimated-rate mode flies the same turn (only Q differs)
+        fx, Jct = coordinated_turn.transition(x.reshape(B * M, n), T)
+        xp[:, :, estimated] = fx.reshape(B, M, 1, n)
+        J[:, :, estimated] = Jct.reshape(B, M, 1, n, n)
     Pp = J @ P[:, :, None] @ np.swapaxes(J, -1, -2) + Q[None, None]
     return xp, Pp, J
 
