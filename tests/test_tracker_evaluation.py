@@ -125,6 +125,27 @@ def test_smoothed_flags_and_positions_after_the_fact(name, monkeypatch):
     assert ev.pos_cv_smoothed == pytest.approx(evaluation._rmse(np.concatenate(err)), rel=1e-6)
 
 
+def test_smoother_batches_stay_under_their_memory_budget(monkeypatch):
+    """Flights of very different lengths: every flight in exactly one batch, and a batch of
+    more than one flight keeps its record (as long as its longest flight) under the budget."""
+    p = presets.get("imm-ct").with_(dt=4.0, measurement_sigma=100.0).filter_model()
+    lengths = np.array([40, 400, 45, 200, 50, 42])
+    Z = np.full((lengths.max(), lengths.size, 2), np.nan)
+    rng = np.random.default_rng(0)
+    for f, n in enumerate(lengths):
+        Z[:n, f] = np.cumsum(np.full((n, 2), 400.0), axis=0) + rng.normal(0, 100, (n, 2))
+    x0, P0 = evaluation._initial_state(Z, 4.0, np.eye(2) * 1e4, 5)
+    per_step = p.n_modes * 5 * 6 * 8
+    monkeypatch.setattr(evaluation, "SMOOTHER_BATCH_BYTES", 3 * 45 * per_step)
+    runs = evaluation._smoothed_runs(Z, x0, P0, p.mu0(), p.imm_arguments(), lengths)
+    batches = [(list(b), L) for b, L, _ in runs]
+    assert sorted(f for b, _ in batches for f in b) == list(range(lengths.size))
+    for b, L in batches:
+        assert L == lengths[b].max()
+        assert len(b) == 1 or len(b) * L * per_step <= evaluation.SMOOTHER_BATCH_BYTES
+    assert [sorted(b) for b, _ in batches][:1] == [[0, 2, 5]]  # the three shortest together
+
+
 def test_fixed_lag_figures_run_from_the_filter_to_the_whole_flight():
     """Lag 0 is the filter (both the IMM's and the CV filter's figures); a lag past the
     flight's end is the fixed-interval smoother."""

@@ -459,8 +459,11 @@ SMOOTHER_BATCH_BYTES = 2**26
 def _smoothed_runs(Z, x0, P0, mu0, model: dict, lengths, lag=None):
     """The IMM of ``model`` run over the measurements Z (T, F, 2) from step 2 on, then
     smoothed (:func:`airspace_sim.tracking.smoother.smooth`; fixed-lag with ``lag`` steps),
-    in batches of flights of similar length. Yields ``(flights (b,), L, Smoothed)`` with the
-    records of steps ``2..L-1``; ``lengths`` (F,) each flight's number of measured steps."""
+    in batches of flights of similar length under :data:`SMOOTHER_BATCH_BYTES` (a batch's
+    record is as long as its longest flight). Re-running the IMM costs less than keeping every
+    flight's record from :func:`evaluate`'s own run at once. Yields ``(flights (b,), L,
+    Smoothed)`` with the records of steps ``2..L-1``; ``lengths`` (F,) each flight's number
+    of measured steps."""
     from airspace_sim.tracking import IMM
     from airspace_sim.tracking.smoother import smooth
 
@@ -468,8 +471,10 @@ def _smoothed_runs(Z, x0, P0, mu0, model: dict, lengths, lag=None):
     order = np.argsort(lengths, kind="stable")
     i = 0
     while i < order.size:
-        per_flight = max(int(lengths[order[i]]), 3) * M * n * (n + 1) * 8
-        b = order[i : i + max(1, SMOOTHER_BATCH_BYTES // per_flight)]
+        # flights sorted by length: a batch of j holds j records of its last one's length
+        longest = np.maximum(lengths[order[i:]], 3)
+        cost = np.arange(1, longest.size + 1) * longest * M * n * (n + 1) * 8
+        b = order[i : i + max(1, int(np.count_nonzero(cost <= SMOOTHER_BATCH_BYTES)))]
         i += b.size
         L = int(lengths[b].max())
         imm = IMM(**model, x0=x0[b], P0=P0[b], mu0=mu0, gate_probability=1.0)
