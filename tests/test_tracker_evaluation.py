@@ -216,6 +216,10 @@ def test_evaluate_tracker_command_on_a_recorded_file(tmp_path, capsys):
     assert cli.main(["evaluate-tracker", str(tmp_path / "f.csv"), "--lag", "-1"]) != 0
     err = capsys.readouterr().err
     assert "lag must be >= 0 s" in err and "Traceback" not in err
+    assert (
+        cli.main(["evaluate-tracker", str(tmp_path / "f.csv"), "--lag", "4", "--no-smoother"]) != 0
+    )
+    assert "--lag needs the smoothers" in capsys.readouterr().err
 
 
 def filterpy_known_motion(truths, sigma, T, sa, accel, seed):

@@ -78,6 +78,8 @@ def run(args) -> int:
     from airspace_sim.recorded import read
     from airspace_sim.tracking.evaluation import evaluate, resample
 
+    if args.lag is not None and args.no_smoother:
+        raise UserError("evaluate-tracker: --lag needs the smoothers; drop --no-smoother")
     paths = _paths(args)
     flights = [f for p in paths for f in read(p)]
     chosen = [presets.get(name) for name in (args.preset or [presets.RECORDED_TRACKER])]

@@ -7,7 +7,8 @@ measurements after k too. :func:`smooth` runs a backward pass over the mode-cond
 posteriors a forward IMM stored, in the form of the expectation-correction smoother for
 switching linear dynamical systems (Barber 2006, "Expectation correction for smoothed
 inference in switching linear dynamical systems", JMLR 7) with the mode posterior below and
-an extended-Kalman step for the estimated-rate mode. From step k + 1 back to k, for every pair (j at k, i at k + 1):
+an extended-Kalman step for the estimated-rate mode. From step k + 1 back to k, for every
+pair (j at k, i at k + 1):
 
 - the prediction of mode j's filtered estimate through mode i's model, ``x⁻ = f_i(x^j_{k|k})``,
   ``P⁻ = J_i P^j_{k|k} J_iᵀ + Q_i`` (``F_i x + u_i`` and ``J_i = F_i`` for a linear mode; the
@@ -21,8 +22,8 @@ an extended-Kalman step for the estimated-rate mode. From step k + 1 back to k, 
   the pair's prediction density averaged over the smoothed estimate of mode i (Barber
   evaluates it at the smoothed mean, ``N(x^i_{k+1|N}; x⁻, P⁻)``; that sharper form lets a
   mode's probability ride back on a smoothed estimate that has run off the track, by
-  hundreds of metres to kilometres on simulated traffic of the very model, ``docs/tracking.md``, "After the
-  fact"); so ``μ_{k|N}(j) = Σ_i Pr(j | i) μ_{k+1|N}(i)`` and
+  hundreds of metres to kilometres on simulated traffic of the very model,
+  ``docs/tracking.md``, "After the fact"); so ``μ_{k|N}(j) = Σ_i Pr(j | i) μ_{k+1|N}(i)`` and
   ``w_{i|j} = Pr(j | i) μ_{k+1|N}(i) / μ_{k|N}(j)``;
 - a Rauch–Tung–Striebel step, ``G = P^j_{k|k} J_iᵀ (P⁻)⁻¹``,
   ``x^{ji} = x^j_{k|k} + G (x^i_{k+1|N} − x⁻)``, ``P^{ji} = P^j_{k|k} + G (P^i_{k+1|N} − P⁻) Gᵀ``,
