@@ -135,9 +135,9 @@ def test_smoother_batches_stay_under_their_memory_budget(monkeypatch):
     for f, n in enumerate(lengths):
         Z[:n, f] = np.cumsum(np.full((n, 2), 400.0), axis=0) + rng.normal(0, 100, (n, 2))
     x0, P0 = evaluation._initial_state(Z, 4.0, np.eye(2) * 1e4, 5)
-    per_step = p.n_modes * 5 * 6 * 8
+    per_step = p.n_modes * 5 * 6 * 8 * evaluation.TWO_FILTER_RECORDS  # whole flights: two filters
     monkeypatch.setattr(evaluation, "SMOOTHER_BATCH_BYTES", 3 * 45 * per_step)
-    runs = evaluation._smoothed_runs(Z, x0, P0, p.mu0(), p.imm_arguments(), lengths)
+    runs = evaluation._smoothed_runs(Z, x0, P0, p.mu0(), p.imm_arguments(), lengths, 4.0)
     batches = [(list(b), L) for b, L, _ in runs]
     assert sorted(f for b, _ in batches for f in b) == list(range(lengths.size))
     for b, L in batches:
@@ -148,7 +148,9 @@ def test_smoother_batches_stay_under_their_memory_budget(monkeypatch):
 
 def test_fixed_lag_figures_run_from_the_filter_to_the_whole_flight():
     """Lag 0 is the filter (both the IMM's and the CV filter's figures); a lag past the
-    flight's end is the fixed-interval smoother."""
+    flight's end is the fixed-interval smoother: the RTS smoother for the CV filter, as on
+    the whole-flight line, and for the IMM expectation correction over the whole flight
+    (the whole-flight line's is the two-filter smoother: close to it on this flight)."""
     t, X = flight(LEGS[:3], dt=4.0)  # a truth on the 4 s grid
     truths = [evaluation.Truth("f", t, X)]
     kw = dict(seed=2, cv_sigmas=(2.0, 8.0))
@@ -159,8 +161,9 @@ def test_fixed_lag_figures_run_from_the_filter_to_the_whole_flight():
     assert zero.pos_cv_smoothed == pytest.approx(zero.pos_cv, rel=1e-9)
     assert zero.smoothed_turning_flagged == zero.turning_flagged
     assert zero.smoothed_straight_flagged == zero.straight_flagged
-    assert far.pos_imm_smoothed == pytest.approx(whole.pos_imm_smoothed, rel=1e-9)
-    assert far.smoothed_turning_flagged == whole.smoothed_turning_flagged
+    assert far.pos_cv_smoothed == pytest.approx(whole.pos_cv_smoothed, rel=1e-9)
+    assert far.pos_imm_smoothed == pytest.approx(whole.pos_imm_smoothed, rel=0.05)
+    assert far.smoothed_turning_flagged == pytest.approx(whole.smoothed_turning_flagged, abs=0.05)
     assert zero.smoother_lag_s == 0.0 and whole.smoother_lag_s is None
     assert any("0 s late" in line for line in zero.lines())
 

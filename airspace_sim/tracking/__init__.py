@@ -11,9 +11,12 @@ matched IMM (mode names included) that can step with any time since the last ste
 - gating diagnostics: ``imm.gated`` (B,) says which finite measurements were rejected,
   ``imm.nis`` their NIS and :func:`gate_threshold` the d² a probability gives;
 - :func:`chi2_band`, :func:`nees`, :func:`nis`: consistency statistics;
-- :func:`smooth`: the IMM smoother over a forward run's record, fixed-interval (states and
-  mode probabilities given the whole record: labelling recorded flights after the fact) or
-  fixed-lag (given a few steps more: what a tracker that reports late can say);
+- :func:`smooth_two_filter`: the fixed-interval IMM smoother (states and mode probabilities
+  given the whole record: labelling recorded flights after the fact), a forward IMM and one
+  over the time-reversed record fused;
+- :func:`smooth`: the expectation-correction IMM smoother over a forward run's record,
+  fixed-lag (given a few steps more: what a tracker that reports late can say) or
+  fixed-interval;
 - :mod:`.coordinated_turn`: the estimated-rate (EKF) mode; :mod:`.evaluation`: trackers
   measured on recorded flights.
 """
@@ -22,6 +25,7 @@ from airspace_sim.tracking.consistency import chi2_band, nees, nis
 from airspace_sim.tracking.imm import DEFAULT_GATE_PROBABILITY, IMM, SlotIMM, gate_threshold
 from airspace_sim.tracking.initialisation import two_point_initialisation
 from airspace_sim.tracking.smoother import Smoothed, smooth
+from airspace_sim.tracking.two_filter import smooth_two_filter
 
 __all__ = [
     "DEFAULT_GATE_PROBABILITY",
@@ -33,5 +37,6 @@ __all__ = [
     "nees",
     "nis",
     "smooth",
+    "smooth_two_filter",
     "two_point_initialisation",
 ]

@@ -454,29 +454,42 @@ def turn_probabilities(mu, x_modes, P_modes, known, turning_modes, rate):
 #: Memory (bytes) a batch of flights' forward record may take when smoothing
 #: (K·B·M·n² covariances; flights are batched by length under it).
 SMOOTHER_BATCH_BYTES = 2**26
+#: Records the two-filter smoother holds at once, per forward record (both filters' and
+#: the fused one's, and the fusion's work arrays): its batches are this many times smaller.
+TWO_FILTER_RECORDS = 4
 
 
-def _smoothed_runs(Z, x0, P0, mu0, model: dict, lengths, lag=None):
-    """The IMM of ``model`` run over the measurements Z (T, F, 2) from step 2 on, then
-    smoothed (:func:`airspace_sim.tracking.smoother.smooth`; fixed-lag with ``lag`` steps),
-    in batches of flights of similar length under :data:`SMOOTHER_BATCH_BYTES` (a batch's
-    record is as long as its longest flight). Re-running the IMM costs less than keeping every
-    flight's record from :func:`evaluate`'s own run at once. Yields ``(flights (b,), L,
-    Smoothed)`` with the records of steps ``2..L-1``; ``lengths`` (F,) each flight's number
-    of measured steps."""
+def _smoothed_runs(Z, x0, P0, mu0, model: dict, lengths, period_s: float, lag=None):
+    """Each flight's measurements Z (T, F, 2) from step 2 on, smoothed by the IMM of
+    ``model``: over the whole flight by two filters
+    (:func:`airspace_sim.tracking.two_filter.smooth_two_filter`; with one mode, the
+    Rauch–Tung–Striebel smoother, which is exact), or with ``lag`` steps of look-ahead by
+    the filter and :func:`airspace_sim.tracking.smoother.smooth`; in batches of flights of similar length
+    under :data:`SMOOTHER_BATCH_BYTES` (a batch's record is as long as its longest flight).
+    Re-running the filters costs less than keeping every flight's record from
+    :func:`evaluate`'s own run at once. Yields ``(flights (b,), L, Smoothed)`` with the
+    records of steps ``2..L-1``; ``lengths`` (F,) each flight's number of measured steps,
+    ``period_s`` the step (s)."""
     from airspace_sim.tracking import IMM
     from airspace_sim.tracking.smoother import smooth
+    from airspace_sim.tracking.two_filter import smooth_two_filter
 
     M, n = len(mu0), x0.shape[1]
+    two_filter = lag is None and M > 1
+    budget = SMOOTHER_BATCH_BYTES // (TWO_FILTER_RECORDS if two_filter else 1)
     order = np.argsort(lengths, kind="stable")
     i = 0
     while i < order.size:
         # flights sorted by length: a batch of j holds j records of its last one's length
         longest = np.maximum(lengths[order[i:]], 3)
         cost = np.arange(1, longest.size + 1) * longest * M * n * (n + 1) * 8
-        b = order[i : i + max(1, int(np.count_nonzero(cost <= SMOOTHER_BATCH_BYTES)))]
+        b = order[i : i + max(1, int(np.count_nonzero(cost <= budget)))]
         i += b.size
         L = int(lengths[b].max())
+        if two_filter:
+            n_steps = lengths[b] - 2
+            yield b, L, smooth_two_filter(Z[2:L, b], model, x0[b], P0[b], mu0, period_s, n_steps)
+            continue
         imm = IMM(**model, x0=x0[b], P0=P0[b], mu0=mu0, gate_probability=1.0)
         mu, xm, Pm = (np.empty((L - 2, b.size) + tail) for tail in ((M,), (M, n), (M, n, n)))
         for k in range(2, L):
@@ -506,17 +519,17 @@ def _flags(p_left, p_right, X, ev) -> dict:
     )
 
 
-def _smoothed_figures(X, Z, ev, imm_run, cv_run, flags, lag=None) -> dict:
+def _smoothed_figures(X, Z, ev, imm_run, cv_run, flags, period_s: float, lag=None) -> dict:
     """The :class:`Evaluation` fields of the smoothed IMM and CV filter: ``imm_run`` and
     ``cv_run`` the (x0, P0, mu0, model) of each, ``flags`` the (known, turning_modes, rate) of
-    :func:`turn_probabilities`, ``lag`` steps of fixed-lag (None: fixed-interval). Errors are
-    summed batch by batch, not kept per step."""
+    :func:`turn_probabilities`, ``period_s`` the step (s), ``lag`` steps of fixed-lag (None:
+    fixed-interval). Errors are summed batch by batch, not kept per step."""
     T, F, _ = X.shape
     lengths = np.isfinite(Z[..., 0]).sum(axis=0)
     p_left, p_right = np.full((T, F), np.nan), np.full((T, F), np.nan)
     sse = [0.0, 0.0]
     for i, run in enumerate((imm_run, cv_run)):
-        for b, L, sm in _smoothed_runs(Z, *run, lengths, lag=lag):
+        for b, L, sm in _smoothed_runs(Z, *run, lengths, period_s, lag=lag):
             e = (sm.x[..., [0, 2]] - X[2:L, b][..., [0, 2]])[ev[2:L, b]]
             sse[i] += float(np.sum(e**2))
             if run is imm_run:
@@ -627,7 +640,7 @@ def evaluate(
         flags = (known, turning_modes, flag_rate)
         cv_run = (x0[:, :5], P0[:, :5, :5], [1.0], cv_model(best))
         imm_run = (x0, P0, mu0, p.imm_arguments())
-        smoothed = _smoothed_figures(X, Z, ev, imm_run, cv_run, flags, lag)
+        smoothed = _smoothed_figures(X, Z, ev, imm_run, cv_run, flags, period_s, lag)
         smoothed["smoother_lag_s"] = None if lag is None else lag * period_s
 
     omega = np.degrees(X[..., 4])

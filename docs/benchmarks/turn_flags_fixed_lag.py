@@ -10,7 +10,7 @@ bent the track beyond the noise; a tracker that may report ``lag`` seconds late 
 measurements up to then (``tracking.smooth(..., lag=steps)``). Printed per lag: turning
 seconds flagged with the right sign / with the wrong sign / straight seconds flagged (the
 flag rule and the seconds of ``evaluate``), and the position RMSE. Lag 0 is the filter,
-"inf" the fixed-interval smoother. Each lag of L steps costs L backward passes. First, how
+"inf" the fixed-interval (two-filter) smoother. Each lag of L steps costs L backward passes. First, how
 long the turns are: for every turning second (|ω| ≥ 1 °/s), the duration and heading change
 of the turn it belongs to (its run of same-sign |ω| ≥ 0.5 °/s), percentiles.
 """
@@ -58,7 +58,7 @@ def flags_at_lag(p, X, Z, period, lag_steps):
     lengths = np.isfinite(Z[..., 0]).sum(axis=0)
     est = np.full((T, F, 4), np.nan)
     left, right = np.full((T, F), np.nan), np.full((T, F), np.nan)
-    runs = E._smoothed_runs(Z, x0, P0, p.mu0(), p.imm_arguments(), lengths, lag=lag_steps)
+    runs = E._smoothed_runs(Z, x0, P0, p.mu0(), p.imm_arguments(), lengths, period, lag_steps)
     for b, L, sm in runs:
         est[2:L, b] = sm.x[..., :4]
         left[2:L, b], right[2:L, b] = E.turn_probabilities(

@@ -1,0 +1,331 @@
+"""Fixed-interval IMM smoothing by two filters: one forward, one over the time-reversed record.
+
+The expectation-correction smoother (:mod:`.smoother`) carries each mode's smoothed
+estimate back from the end of the record one step at a time. Where the forward IMM keeps
+some probability on a mode that is not flying (the quiet mode in a turn, re-mixed every
+step), that mode's smoothed probability rides back unchanged while its estimate, a rigid
+straight line for a mode with little process noise, runs off the track: on traffic of the
+model itself, 0.2 of the probability held for 15 steps by an estimate 1.3 km off
+(``docs/tracking.md``, "Two filters"). Here the information after step k comes from a
+second IMM instead, run over the measurements in reverse order, so every mode's backward
+estimate is re-mixed and re-measured at every step as the forward one is (Helmick, Blair &
+Hoffman 1995, "Fixed-interval smoothing for Markovian switching systems", IEEE Trans.
+Inf. Theory 41(6); the two-filter form of Fraser & Potter 1969 for each mode).
+
+Time reversal. Flown backwards, a trajectory keeps its positions, negates its velocity
+and its turn rate (a left turn flown backwards is a right turn): :data:`REVERSAL`. A model
+is its own time reversal when every mode has a mirror mode (the same motion reflected,
+``y → −y``, :data:`MIRROR`: a turn at ω and one at −ω, a straight mode and itself, an
+estimated-rate mode and itself) and the mode chain is run backwards,
+``Π^rev_ij = Π_ji p_j / p_i`` with ``p`` its stationary distribution. For a linear mode the
+reversed model's transition density equals the forward one's (the discrete white-noise
+acceleration is symmetric in time), so the backward filter started from the last two
+measurements computes the likelihood of the measurements after k.
+
+Fusion, per mode j at step k, with both filters' posteriors including the measurement
+``z_k`` (so it is divided out once) and the backward filter's prior ``p_0`` (flat in
+position and velocity; ``p_j`` for the mode; for an estimated-rate mode its turn rate's
+stationary spread ``N(0, s_j²)``, ``s_j² = Q_j[Ω, Ω] / (1 − Π_jj)``: the rate's random walk
+over a sojourn's mean length) divided out too:
+
+    p(x, s_k = j | Y) ∝ μ_f(j) N(x; x^j_f, P^j_f) · μ_b(j) N(x; x^j_b, P^j_b)
+                        / (p_j N(z_k; H x, R) p_0(Ω | j)),
+
+a Gaussian in information form, ``J = P_f⁻¹ + P_b⁻¹ − Hᵀ R⁻¹ H − e_Ω e_Ωᵀ / s_j²``, and
+its integral over x the smoothed mode weight. A component a mode pins (Ω in a known-rate
+or straight mode) is left out of the fusion: both filters hold it at the mode's value.
+
+Compared with :func:`.smoother.smooth`: the same Smoothed record; it needs the measurements
+(it runs both filters), and it is only fixed-interval (the fixed-lag smoother stays
+expectation correction).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from airspace_sim.dynamics import models
+from airspace_sim.errors import UserError
+from airspace_sim.tracking.initialisation import two_point_initialisation
+from airspace_sim.tracking.smoother import Smoothed
+
+#: Time reversal of ``[x, vx, y, vy, Ω]``: the velocity and the turn rate change sign.
+REVERSAL = np.array([1.0, -1.0, 1.0, -1.0, -1.0])
+#: The reflection ``y → −y`` of ``[x, vx, y, vy, Ω]``: a turn at ω becomes a turn at −ω.
+MIRROR = np.array([1.0, 1.0, -1.0, -1.0, -1.0])
+
+
+def stationary(transition_matrix) -> np.ndarray:
+    """(M,) the stationary distribution p of a row-stochastic Π (M, M): ``p Π = p``."""
+    Pi = np.asarray(transition_matrix, dtype=float)
+    w, v = np.linalg.eig(Pi.T)
+    p = np.abs(np.real(v[:, np.argmin(np.abs(w - 1.0))]))
+    return p / p.sum()
+
+
+def mirror_modes(model: dict) -> np.ndarray:
+    """(M,) int: for each mode j, the mode whose motion is mode j's reflected (same
+    transition, noise and offset under :data:`MIRROR`, same estimated-rate flag); a
+    one-line :class:`UserError` when a mode has none."""
+    F = np.asarray(model["transitions"], dtype=float)
+    Q = np.asarray(model["process_noise"], dtype=float)
+    M = F.shape[0]
+    Q = np.broadcast_to(Q, F.shape)
+    U = model.get("offsets")
+    U = np.zeros(F.shape[:2]) if U is None else np.asarray(U, dtype=float)
+    est = model.get("estimated_turn_rate")
+    est = np.zeros(M, bool) if est is None else np.asarray(est, dtype=bool)
+    D = np.outer(MIRROR, MIRROR)
+    perm = np.full(M, -1)
+    for j in range(M):
+        for i in range(M):
+            if (
+                est[i] == est[j]
+                and np.allclose(F[i], D * F[j], rtol=1e-9, atol=1e-12)
+                and np.allclose(Q[i], D * Q[j], rtol=1e-9, atol=1e-15)
+                and np.allclose(U[i], MIRROR * U[j], rtol=1e-9, atol=1e-15)
+            ):
+                perm[j] = i
+                break
+        if perm[j] < 0:
+            raise UserError(
+                f"two-filter smoothing: mode {j} has no mirror mode (a turn at -omega with the "
+                "same noise); the model is not its own time reversal"
+            )
+    return perm
+
+
+def reversed_model(model: dict):
+    """The model flown backwards: (IMM keyword arguments, perm (M,), p (M,)). Reversed mode
+    ``perm[j]`` is forward mode j flown backwards (its mirror); the chain is
+    ``Π^rev_ij = Π_ji p_j / p_i`` relabelled accordingly, p the forward chain's stationary
+    distribution."""
+    perm = mirror_modes(model)
+    Pi = np.asarray(model["transition_matrix"], dtype=float)
+    p = stationary(Pi)
+    rev = Pi.T * p[None, :] / np.maximum(p[:, None], np.finfo(float).tiny)
+    rev /= rev.sum(axis=1, keepdims=True)
+    back = np.argsort(perm)  # reversed label a is forward mode back[a]
+    out = dict(model)
+    out["transition_matrix"] = rev[np.ix_(back, back)]
+    return out, perm, p
+
+
+def rate_prior_variance(model: dict) -> np.ndarray:
+    """(M,) (rad/s)²: an estimated-rate mode's turn-rate spread ``Q_j[Ω, Ω] / (1 − Π_jj)``
+    (its random walk over a sojourn's mean length); NaN for the other modes."""
+    M = len(model["transition_matrix"])
+    est = model.get("estimated_turn_rate")
+    est = np.zeros(M, bool) if est is None else np.asarray(est, dtype=bool)
+    Q = np.broadcast_to(np.asarray(model["process_noise"], dtype=float), (M,) + (5, 5))
+    stay = np.diagonal(np.asarray(model["transition_matrix"], dtype=float))
+    w = models.TURN_RATE
+    with np.errstate(divide="ignore"):
+        s2 = Q[:, w, w] / np.maximum(1.0 - stay, np.finfo(float).tiny)
+    return np.where(est, s2, np.nan)
+
+
+def _run(imm, z):
+    """Step ``imm`` through z (K, B, m); its records μ (K, B, M), x^j, P^j after every step."""
+    K = z.shape[0]
+    B, M, n = imm.x_modes.shape
+    mu, x, P = np.empty((K, B, M)), np.empty((K, B, M, n)), np.empty((K, B, M, n, n))
+    for k in range(K):
+        imm.step(z[k])
+        mu[k], x[k], P[k] = imm.mu, imm.x_modes, imm.P_modes
+    return mu, x, P
+
+
+def _log_gauss(x, mean, cov):
+    """log N(x; mean, cov) over the last axis; x, mean (..., d), cov (..., d, d)."""
+    d = x - mean
+    maha = np.einsum("...i,...i->...", d, np.linalg.solve(cov, d[..., None])[..., 0])
+    return -0.5 * (maha + np.linalg.slogdet(cov)[1] + d.shape[-1] * math.log(2 * math.pi))
+
+
+def smooth_two_filter(z, model: dict, x0, P0, mu0, dt: float, n_steps=None) -> Smoothed:
+    """Fixed-interval IMM smoothing of the records ``z`` by a forward and a backward IMM.
+
+    Parameters
+    ----------
+    z : (K, B, m)
+        Measurements of K steps of B records (a NaN row: none; the forward IMM steps
+        through them from ``x0``, ``P0``, ``mu0`` as :class:`~airspace_sim.tracking.IMM` does).
+    model : dict
+        The IMM's keyword arguments (``Preset.imm_arguments()``), state ``[x, vx, y, vy,
+        Ω]``; every mode must have a mirror mode (:func:`mirror_modes`).
+    x0 : (B, 5), P0 : (B, 5, 5), mu0 : (M,)
+        The forward filters' start.
+    dt : float
+        Seconds between steps (the backward filters start from each record's last two
+        measurements, :func:`~airspace_sim.tracking.two_point_initialisation`).
+    n_steps : (B,) int, optional
+        Each record's own length; its steps from ``n_steps[b]`` on are the forward
+        filter's predictions. None: all K.
+
+    Returns
+    -------
+    Smoothed
+        μ, x^j, P^j for every step; a record's last step is the forward filter's.
+    """
+    from airspace_sim.tracking import IMM
+
+    if model.get("along_track_acceleration") is not None:
+        raise UserError(
+            "two-filter smoothing: models with the along-track acceleration are not supported"
+        )
+    z = np.asarray(z, dtype=float)
+    K, B, _ = z.shape
+    x0, P0 = np.asarray(x0, dtype=float), np.asarray(P0, dtype=float)
+    if x0.shape != (B, models.N_STATE) or P0.shape != (B, models.N_STATE, models.N_STATE):
+        raise UserError(
+            f"two-filter smoothing: x0 {x0.shape} and P0 {P0.shape} must be ({B}, 5) and ({B}, 5, 5)"
+        )
+    n_steps = np.full(B, K) if n_steps is None else np.asarray(n_steps, dtype=int)
+    if n_steps.shape != (B,) or np.any(n_steps > K) or np.any(n_steps < 0):
+        raise UserError(f"two-filter smoothing: n_steps must be (B,) = ({B},) in 0..{K}")
+    rows = np.arange(B)
+    ends = np.stack([z[np.maximum(n_steps - i, 0), rows] for i in (1, 2)])  # (2, B, m)
+    long_enough = n_steps >= 2
+    bad = long_enough & ~np.all(np.isfinite(ends), axis=(0, 2))
+    if bad.any():
+        raise UserError(
+            f"two-filter smoothing: record {int(np.flatnonzero(bad)[0])} has no measurement at "
+            "one of its last two steps (the backward filter starts from them)"
+        )
+    R = np.asarray(model["measurement_noise"], dtype=float)
+    H = np.asarray(model["measurement_matrix"], dtype=float)
+    mu0 = np.asarray(mu0, dtype=float)
+    mu_f, x_f, P_f = _run(IMM(**model, x0=x0, P0=P0, mu0=mu0, gate_probability=1.0), z)
+
+    rmodel, perm, p = reversed_model(model)
+    s2 = rate_prior_variance(model)
+    M = mu0.size
+    back_omega_var = float(np.nanmax(s2)) if np.isfinite(s2).any() else 1e-6
+    t = np.arange(K)[:, None]
+    src = n_steps[None, :] - 1 - t  # reversed step t is forward step n - 1 - t
+    zr = np.where((src >= 0)[..., None], z[np.clip(src, 0, K - 1), rows[None]], np.nan)
+    ok_end = np.where(long_enough[:, None], ends, 0.0)
+    # the last two measurements in reversed order: the reversed state at step n - 2
+    xb0, Pb0 = two_point_initialisation(ok_end[0], ok_end[1], dt, R, 0.0, back_omega_var)
+    mu0_b = p[np.argsort(perm)]
+    mu_r, x_r, P_r = _run(IMM(**rmodel, x0=xb0, P0=Pb0, mu0=mu0_b, gate_probability=1.0), zr[2:])
+    # reversed step 1 is the start itself: the last two measurements, no mode information
+    mu_r = np.concatenate([np.broadcast_to(mu0_b, (1, B, M)), mu_r])
+    x_r = np.concatenate([np.broadcast_to(xb0[None, :, None], (1, B, M, 5)), x_r])
+    P_r = np.concatenate([np.broadcast_to(Pb0[None, :, None], (1, B, M, 5, 5)), P_r])
+    # back to forward time and labels: reversed step t >= 1 is forward step k = n - 1 - t
+    tt = np.clip(n_steps[None, :] - 1 - np.arange(K)[:, None], 1, K - 1) - 1  # (K, B)
+    have = (np.arange(K)[:, None] <= n_steps[None, :] - 2) & long_enough[None, :]
+    mu_b = mu_r[tt, rows[None]][..., perm]
+    x_b = x_r[tt, rows[None]][..., perm, :] * REVERSAL
+    P_b = P_r[tt, rows[None]][..., perm, :, :] * np.outer(REVERSAL, REVERSAL)
+
+    est = model.get("estimated_turn_rate")
+    est = np.zeros(M, bool) if est is None else np.asarray(est, dtype=bool)
+    Pi = np.asarray(model["transition_matrix"], dtype=float)
+    measured = np.all(np.isfinite(z), axis=-1)  # (K, B): z_k is in both posteriors
+    zk = np.where(measured[..., None], z, 0.0)
+    meas = (zk, measured, H, np.linalg.inv(R), R)
+    with np.errstate(divide="ignore"):
+        log_f, log_b = np.log(mu_f), np.log(mu_b) - np.log(p)
+    log_joint = np.full((K, B, M, M), -np.inf)  # (j at k, i at k + 1)
+    x_s, P_s = x_f.copy(), P_f.copy()
+    for j in range(M):
+        pairs = [_fuse_pair(x_f[..., j, :], P_f[..., j, :, :], x_b[..., i, :], P_b[..., i, :, :],
+                            est[j], est[i], s2[i], have, meas) for i in range(M)]  # fmt: skip
+        with np.errstate(divide="ignore"):
+            log_pi = np.log(Pi[j])
+        for i, (log_c, _, _) in enumerate(pairs):
+            log_joint[..., j, i] = log_f[..., j] + log_pi[i] + log_b[..., i] + log_c
+        # mode j's smoothed estimate: its pairs' fused estimates, moment-matched
+        lj = log_joint[..., j, :]
+        top = np.max(lj, axis=-1)
+        w = np.exp(lj - np.where(np.isfinite(top), top, 0.0)[..., None])
+        w /= np.maximum(w.sum(axis=-1, keepdims=True), np.finfo(float).tiny)
+        xp = np.stack([x for _, x, _ in pairs], axis=-2)  # (K, B, M_i, 5)
+        Pp = np.stack([P for _, _, P in pairs], axis=-3)
+        xm = np.einsum("kbi,kbia->kba", w, xp)
+        e = xp - xm[..., None, :]
+        Pm = np.einsum("kbi,kbiac->kbac", w, Pp + e[..., :, None] * e[..., None, :])
+        ok = np.isfinite(top)
+        x_s[..., j, :] = np.where(ok[..., None], xm, x_f[..., j, :])
+        P_s[..., j, :, :] = np.where(ok[..., None, None], Pm, P_f[..., j, :, :])
+    flat = log_joint.reshape(K, B, M * M)
+    fused = np.isfinite(flat).any(axis=-1)
+    top = np.where(fused, flat.max(axis=-1), 0.0)
+    joint = np.exp(log_joint - top[..., None, None]).sum(axis=-1)
+    mu_s = joint / np.maximum(joint.sum(axis=-1, keepdims=True), np.finfo(float).tiny)
+    mu_s = np.where(fused[..., None], mu_s, mu_f)
+    return Smoothed(mu_s, x_s, P_s)
+
+
+def _fuse_pair(xf, Pf, xb, Pb, est_f, est_b, s2_b, have, meas):
+    """Fuse forward mode j's posterior at k with backward mode i's (i the mode of step
+    k + 1, which the reversed filter flew from k + 1 back to k).
+
+    xf, xb (K, B, 5), Pf, Pb (K, B, 5, 5); ``est_f``, ``est_b`` whether each mode estimates
+    Ω; ``s2_b`` backward mode i's turn-rate prior variance; ``have`` (K, B) where the
+    backward filter has an estimate; ``meas`` (z (K, B, m), measured (K, B), H, R⁻¹, R).
+    Returns log c (K, B), the integral of ``N_f N_b / (N(z_k; Hx, R) p_0)`` (−inf where no
+    fusion), and the fused x (K, B, 5), P (K, B, 5, 5).
+
+    Ω: a mode that pins it (straight or known-rate) holds it at its value (forward) or
+    says nothing of the rate at k (backward: mode i moves the aircraft from k with Ω_k only
+    when it estimates it); forward pinned and backward estimated: the backward estimate is
+    conditioned on the forward value.
+    """
+    z, measured, H, Ri, R = meas
+    pv = np.arange(4)
+    U = np.arange(5) if est_f else pv  # the fused components: the forward mode's free ones
+    extra = np.zeros(have.shape)
+    xb_u, Pb_u = xb[..., pv], Pb[..., pv[:, None], pv]
+    if est_b and est_f:
+        xb_u, Pb_u = xb, Pb
+    elif est_b:  # condition the backward Gaussian on the forward mode's pinned rate
+        w0 = xf[..., 4]
+        var = np.maximum(Pb[..., 4, 4], np.finfo(float).tiny)
+        gain = Pb[..., pv, 4] / var[..., None]
+        xb_u = xb[..., pv] + gain * (w0 - xb[..., 4])[..., None]
+        Pb_u = Pb_u - gain[..., :, None] * Pb[..., 4, pv][..., None, :]
+        extra = _log_gauss(w0[..., None], xb[..., 4:], var[..., None, None]) - _log_gauss(
+            w0[..., None], np.zeros(1), np.array([[s2_b]])
+        )
+    d = U.size
+    eye = np.eye(d)
+    Pf_u = np.where(have[..., None, None], Pf[..., U[:, None], U], eye)
+    Pb_u = np.where(have[..., None, None], Pb_u, np.eye(xb_u.shape[-1]))
+    xf_u, xb_u = xf[..., U], np.where(have[..., None], xb_u, 0.0)
+    Jf, Jb = np.linalg.inv(Pf_u), np.linalg.inv(Pb_u)
+    Hu = H[:, U]
+    J = Jf.copy()
+    nb = xb_u.shape[-1]
+    J[..., :nb, :nb] += Jb
+    J -= measured[..., None, None] * (Hu.T @ Ri @ Hu)
+    h = np.einsum("...ij,...j->...i", Jf, xf_u)
+    h[..., :nb] += np.einsum("...ij,...j->...i", Jb, xb_u)
+    h -= z @ (Ri @ Hu)
+    if est_b and est_f:  # the backward filter's own prior on the rate, divided out
+        J[..., 4, 4] -= 1.0 / s2_b
+    J = np.where(have[..., None, None], J, eye)
+    sign, logdet = np.linalg.slogdet(J)
+    pd = have & (sign > 0) & np.all(np.linalg.eigvalsh(J) > 0, axis=-1)
+    J = np.where(pd[..., None, None], J, eye)
+    x = np.linalg.solve(J, h[..., None])[..., 0]
+    resid = z - x @ Hu.T
+    log_c = (
+        _log_gauss(x, xf_u, Pf_u)
+        + _log_gauss(x[..., :nb], xb_u, Pb_u)
+        - np.where(measured, _log_gauss(resid, np.zeros(z.shape[-1]), R), 0.0)
+        + 0.5 * d * math.log(2 * math.pi)
+        - 0.5 * logdet
+        + extra
+    )
+    if est_b and est_f:
+        log_c -= _log_gauss(x[..., 4:], np.zeros(1), np.array([[s2_b]]))
+    xs, Ps = xf.copy(), Pf.copy()
+    xs[..., U] = np.where(pd[..., None], x, xf_u)
+    Ps[..., U[:, None], U] = np.where(pd[..., None, None], np.linalg.inv(J), Pf_u)
+    return np.where(pd, log_c, -np.inf), xs, Ps
