@@ -135,7 +135,7 @@ def test_smoother_batches_stay_under_their_memory_budget(monkeypatch):
     for f, n in enumerate(lengths):
         Z[:n, f] = np.cumsum(np.full((n, 2), 400.0), axis=0) + rng.normal(0, 100, (n, 2))
     x0, P0 = evaluation._initial_state(Z, 4.0, np.eye(2) * 1e4, 5)
-    per_step = p.n_modes * 5 * 6 * 8 * evaluation.TWO_FILTER_RECORDS  # whole flights: two filters
+    per_step = p.n_modes * 5 * 6 * 8 * evaluation.two_filter_records(p.n_modes)  # two filters
     monkeypatch.setattr(evaluation, "SMOOTHER_BATCH_BYTES", 3 * 45 * per_step)
     runs = evaluation._smoothed_runs(Z, x0, P0, p.mu0(), p.imm_arguments(), lengths, 4.0)
     batches = [(list(b), L) for b, L, _ in runs]

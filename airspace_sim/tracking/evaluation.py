@@ -451,12 +451,17 @@ def turn_probabilities(mu, x_modes, P_modes, known, turning_modes, rate):
     return np.sum(m * np.nan_to_num(left), axis=-1), np.sum(m * np.nan_to_num(right), axis=-1)
 
 
-#: Memory (bytes) a batch of flights' forward record may take when smoothing
-#: (K·B·M·n² covariances; flights are batched by length under it).
-SMOOTHER_BATCH_BYTES = 2**26
-#: Records the two-filter smoother holds at once, per forward record (both filters' and
-#: the fused one's, and the fusion's work arrays): its batches are this many times smaller.
-TWO_FILTER_RECORDS = 4
+#: Memory (bytes) a batch of flights' smoothing may take: the forward record's K·B·M·n²
+#: covariances for fixed-lag smoothing, and :func:`two_filter_records` times that for two
+#: filters; flights are batched by length under it.
+SMOOTHER_BATCH_BYTES = 2**27
+
+
+def two_filter_records(n_modes: int) -> int:
+    """How many forward records' memory the two-filter smoother holds at once: both filters'
+    records, the backward one in forward time, the fused one, one fused pair per mode for
+    the mode being merged, and the fusion's work arrays."""
+    return 6 + n_modes
 
 
 def _smoothed_runs(Z, x0, P0, mu0, model: dict, lengths, period_s: float, lag=None):
@@ -476,7 +481,7 @@ def _smoothed_runs(Z, x0, P0, mu0, model: dict, lengths, period_s: float, lag=No
 
     M, n = len(mu0), x0.shape[1]
     two_filter = lag is None and M > 1
-    budget = SMOOTHER_BATCH_BYTES // (TWO_FILTER_RECORDS if two_filter else 1)
+    budget = SMOOTHER_BATCH_BYTES // (two_filter_records(M) if two_filter else 1)
     order = np.argsort(lengths, kind="stable")
     i = 0
     while i < order.size:
