@@ -35,9 +35,11 @@ flags are also broken down by the time since the turn began (:attr:`Evaluation.o
 how much of the shortfall is detection delay; and both filters' position errors by phase
 (:attr:`Evaluation.phases`: in a turn or after one, by the seconds since it began or ended):
 where the IMM gains on the CV filter and where it loses. After the fact
-(``evaluate(smoother=True)``, the default): both filters smoothed over each whole flight, or
-with a fixed lag (``smoother_lag_s``; :func:`airspace_sim.tracking.smoother.smooth`), their
-position RMSEs and the smoothed IMM's turn flags.
+(``evaluate(smoother=True)``, the default): both filters smoothed over each whole flight
+(the IMM by two filters, :func:`airspace_sim.tracking.two_filter.smooth_two_filter`; the CV
+filter by the RTS smoother), or with a fixed lag (``smoother_lag_s``;
+:func:`airspace_sim.tracking.smoother.smooth`), their position RMSEs and the smoothed IMM's
+turn flags.
 
 Flights are given as arrays (times in seconds, east/north positions in metres in a local
 frame), so any reader can feed this module; the ``evaluate-tracker`` command reads files.
@@ -468,9 +470,10 @@ def _smoothed_runs(Z, x0, P0, mu0, model: dict, lengths, period_s: float, lag=No
     """Each flight's measurements Z (T, F, 2) from step 2 on, smoothed by the IMM of
     ``model``: over the whole flight by two filters
     (:func:`airspace_sim.tracking.two_filter.smooth_two_filter`; with one mode, the
-    Rauch–Tung–Striebel smoother, which is exact), or with ``lag`` steps of look-ahead by
-    the filter and :func:`airspace_sim.tracking.smoother.smooth`; in batches of flights of similar length
-    under :data:`SMOOTHER_BATCH_BYTES` (a batch's record is as long as its longest flight).
+    Rauch–Tung–Striebel smoother, which is exact), or with ``lag`` steps of look-ahead by the
+    filter and :func:`airspace_sim.tracking.smoother.smooth`; in batches of flights of similar
+    length under :data:`SMOOTHER_BATCH_BYTES` (a batch's record is as long as its longest
+    flight).
     Re-running the filters costs less than keeping every flight's record from
     :func:`evaluate`'s own run at once. Yields ``(flights (b,), L, Smoothed)`` with the
     records of steps ``2..L-1``; ``lengths`` (F,) each flight's number of measured steps,
@@ -575,11 +578,12 @@ def evaluate(
     ``gated`` counts the measurements the given gate rejected.
 
     ``smoother``: also smooth both filters over each whole flight (the IMM with
-    :func:`~airspace_sim.tracking.smoother.smooth`, the best CV filter with the same, one
-    mode: the RTS smoother) and score the smoothed turn flags and positions (always without
+    :func:`~airspace_sim.tracking.two_filter.smooth_two_filter`, the best CV filter with the
+    RTS smoother) and score the smoothed turn flags and positions (always without
     a gate): the turns a recorded flight holds, labelled after the fact. ``smoother_lag_s``:
-    fixed-lag smoothers instead, each step given the measurements up to that many seconds
-    later (rounded to whole steps): the flags of a tracker that reports that late. Not for
+    fixed-lag smoothers instead (:func:`~airspace_sim.tracking.smoother.smooth` with ``lag``),
+    each step given the measurements up to that many seconds later (rounded to whole steps):
+    the flags of a tracker that reports that late. Not for
     models with the along-track acceleration (their smoothed fields stay None).
     """
     from airspace_sim.tracking import IMM

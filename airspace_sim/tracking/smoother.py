@@ -44,6 +44,12 @@ A mode whose model pins a state component (a known-rate mode sets Ω = ω_j: a z
 information back (its gain column is zero) and its density is the same for every j, which a
 unit on the zero diagonal gives exactly.
 
+Over long records the fixed-interval form loses to its own 10–20-step lag, even on traffic
+of the model itself: where the forward filter keeps some probability on a mode that is not
+flying, that probability rides back on the mode's smoothed estimate after it has run off
+(``docs/tracking.md``, "Two filters"). For the whole record use
+:func:`.two_filter.smooth_two_filter`; this one is the fixed-lag smoother.
+
 Memory: the forward pass's K·B·M·n² covariances; callers with long records split the
 trackers into batches (:func:`airspace_sim.tracking.evaluation.evaluate` does).
 """
