@@ -347,10 +347,11 @@ def test_phases_partition_the_seconds_and_their_errors():
 
 
 def test_tuning_and_floor_scripts_run_on_flights_made_here(tmp_path, monkeypatch, capsys):
-    """docs/benchmarks/tune_tracker.py (with a 4-mode candidate), tracker_floor.py and
-    turn_flags_fixed_lag.py on four traffic-style JSON files written here: the split, the
-    candidate with another number of modes, the floors (told more, never worse than the CV
-    filter), the flags with a delay."""
+    """docs/benchmarks/tune_tracker.py (with a 4-mode candidate), tracker_floor.py,
+    turn_flags_fixed_lag.py and causal_turn_detector.py on four traffic-style JSON files
+    written here: the split, the candidate with another number of modes, the floors (told
+    more, never worse than the CV filter), the flags with a delay, the causal detector (its
+    fits' derivatives exact on a quadratic path)."""
     pytest.importorskip("airspace_sim.recorded")
     pd = pytest.importorskip("pandas")
     pyproj = pytest.importorskip("pyproj")
@@ -416,6 +417,24 @@ def test_tuning_and_floor_scripts_run_on_flights_made_here(tmp_path, monkeypatch
     turning = [float(ln.split(":")[1].split("%")[0]) for ln in rows]
     assert [ln.split(":")[0].strip() for ln in rows] == ["lag 0 s", "lag 12 s", "lag inf s"]
     assert turning[0] < turning[1] <= turning[2] + 1.0 and turning[2] > 80.0
+
+    # a causal polynomial-fit turn detector, its best threshold at <= 2% of straight seconds
+    sys.modules.pop("causal_turn_detector", None)
+    import causal_turn_detector
+
+    t = np.arange(20.0)[:, None, None]  # a quadratic path: the fit's derivatives are exact
+    path = np.concatenate([3 + 2 * t + 0.5 * t**2, 1 - t - 0.25 * t**2], axis=-1)
+    v = causal_turn_detector.causal_derivative(path, 6, 2, 1, 1.0)
+    a = causal_turn_detector.causal_derivative(path, 6, 2, 2, 1.0)
+    np.testing.assert_allclose(v[5:, 0], np.c_[2 + t[5:, 0], -1 - 0.5 * t[5:, 0]], atol=1e-9)
+    np.testing.assert_allclose(a[5:, 0], np.tile([1.0, -0.5], (15, 1)), atol=1e-9)
+    assert np.isnan(v[:5]).all()
+    causal_turn_detector.main([str(tmp_path), "--split", "all", "--period", "4",
+                               "--windows", "16,32", "--orders", "2"])  # fmt: skip
+    rows = [ln for ln in capsys.readouterr().out.splitlines() if "window" in ln]
+    assert [ln.split(",")[0].strip() for ln in rows] == ["window 16 s", "window 32 s"]
+    flagged = [ln.split(": ")[-1] for ln in rows if "none" not in ln]
+    assert flagged and all(float(f.split("/")[1].rstrip("%")) <= 2.0 for f in flagged)
 
 
 def test_tune_tracker_splits_a_collection_file_by_flight(tmp_path, monkeypatch):
