@@ -20,7 +20,9 @@ filter, the backward one and their combinations (turning seconds flagged with th
 - mean: (p_f + p_b)/2 above a threshold.
 
 An experiment for docs/tracking.md, not a tracker: the thresholds and priors are chosen
-on the training half.
+on the training half. It combines the two filters' turn probabilities only; the two-filter
+IMM smoother, which fuses their mode-conditioned estimates pair by pair, is
+``airspace_sim.tracking.smooth_two_filter`` (docs/tracking.md, "Two filters").
 """
 
 from __future__ import annotations
