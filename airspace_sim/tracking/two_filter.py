@@ -22,18 +22,24 @@ reversed model's transition density equals the forward one's (the discrete white
 acceleration is symmetric in time), so the backward filter started from the last two
 measurements computes the likelihood of the measurements after k.
 
-Fusion, per mode j at step k, with both filters' posteriors including the measurement
-``z_k`` (so it is divided out once) and the backward filter's prior ``p_0`` (flat in
-position and velocity; ``p_j`` for the mode; for an estimated-rate mode its turn rate's
-stationary spread ``N(0, s_j²)``, ``s_j² = Q_j[Ω, Ω] / (1 − Π_jj)``: the rate's random walk
-over a sojourn's mean length) divided out too:
+Fusion, per pair of modes at step k: j the forward filter's (the mode that flew k − 1 → k)
+and i the backward filter's, which is the mode that flew k → k + 1 (the reversed filter's
+mode at k moved it from k + 1 back to k). Both posteriors include the measurement ``z_k``
+(divided out once) and the backward one the backward filter's prior ``p_0`` (flat in
+position and velocity; ``p_i`` for the mode; for an estimated-rate mode its turn rate's
+stationary spread ``N(0, s_i²)``, ``s_i² = Q_i[Ω, Ω] / (1 − Π_ii)``: the rate's random walk
+over a sojourn's mean length), divided out too:
 
-    p(x, s_k = j | Y) ∝ μ_f(j) N(x; x^j_f, P^j_f) · μ_b(j) N(x; x^j_b, P^j_b)
-                        / (p_j N(z_k; H x, R) p_0(Ω | j)),
+    p(x_k, s_k = j, s_{k+1} = i | Y) ∝ μ_f(j) N(x; x^j_f, P^j_f) · Π_ji
+                        · μ_b(i) N(x; x^i_b, P^i_b) / (p_i N(z_k; H x, R) p_0(Ω | i)),
 
-a Gaussian in information form, ``J = P_f⁻¹ + P_b⁻¹ − Hᵀ R⁻¹ H − e_Ω e_Ωᵀ / s_j²``, and
-its integral over x the smoothed mode weight. A component a mode pins (Ω in a known-rate
-or straight mode) is left out of the fusion: both filters hold it at the mode's value.
+a Gaussian in information form, ``J = P_f⁻¹ + P_b⁻¹ − Hᵀ R⁻¹ H − e_Ω e_Ωᵀ / s_i²``, whose
+integral over x is the pair's weight; ``μ_s(j)`` sums them over i, mode j's smoothed
+estimate is their fused Gaussians moment-matched. Ω where a mode pins it (a straight or
+known-rate mode): the forward mode holds it at its value, the backward one says nothing of
+Ω at k (it moves the aircraft without it), and an estimated backward rate meeting a pinned
+forward one is conditioned on it (:func:`_fuse_pair`). Neither filter gates (every
+measurement is used, as in :func:`~airspace_sim.tracking.evaluation.evaluate`).
 
 Compared with :func:`.smoother.smooth`: the same Smoothed record; it needs the measurements
 (it runs both filters), and it is only fixed-interval (the fixed-lag smoother stays
@@ -181,7 +187,8 @@ def smooth_two_filter(z, model: dict, x0, P0, mu0, dt: float, n_steps=None) -> S
     x0, P0 = np.asarray(x0, dtype=float), np.asarray(P0, dtype=float)
     if x0.shape != (B, models.N_STATE) or P0.shape != (B, models.N_STATE, models.N_STATE):
         raise UserError(
-            f"two-filter smoothing: x0 {x0.shape} and P0 {P0.shape} must be ({B}, 5) and ({B}, 5, 5)"
+            f"two-filter smoothing: x0 {x0.shape} and P0 {P0.shape} must be ({B}, 5) and "
+            f"({B}, 5, 5)"
         )
     n_steps = np.full(B, K) if n_steps is None else np.asarray(n_steps, dtype=int)
     if n_steps.shape != (B,) or np.any(n_steps > K) or np.any(n_steps < 0):
