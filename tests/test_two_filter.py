@@ -21,7 +21,7 @@ import pytest
 
 filterpy = pytest.importorskip("filterpy")
 from filterpy.kalman import KalmanFilter  # noqa: E402
-from test_smoother import SIGMA, cv_model, exact_smoother, record, straight_then_turn  # noqa: E402
+from test_smoother import SIGMA, cv_model, exact_comparison, record, straight_then_turn  # noqa: E402
 
 from airspace_sim.dynamics import presets  # noqa: E402
 from airspace_sim.errors import UserError  # noqa: E402
@@ -62,20 +62,9 @@ def test_several_modes_approach_the_exact_smoother(seed):
     """`realistic`'s three known-rate modes, straight flight then a 3 °/s turn at 4 s: the
     smoothed mode probabilities and positions are, over the record, much closer to the
     exact ones than the filter's."""
-    rng = np.random.default_rng(seed)
-    T, K = 4.0, 8
-    p = presets.realistic(T).with_(measurement_sigma=SIGMA)
-    model = p.imm_arguments()
-    Z = straight_then_turn(rng, K, T, rate_deg=3.0)
-    x0, P0 = np.array([0.0, 150.0, 0.0, 40.0, 0.0]), np.diag([1e4, 25.0, 1e4, 25.0, 0.0])
-    mu_f, x_f, _ = record(model, Z, x0[None], P0[None] + 1e-12 * np.eye(5), p.mu0())
-    sm = smooth_two_filter(Z, model, x0[None], P0[None] + 1e-12 * np.eye(5), p.mu0(), T)
-    mu_exact, x_exact = exact_smoother(model, Z[:, 0], x0, P0, p.mu0())
-    filtered = np.einsum("km,kmn->kn", mu_f[:, 0], x_f[:, 0])
-    d_mu_s = np.abs(sm.mu[:, 0] - mu_exact).sum(axis=1).mean()
-    d_mu_f = np.abs(mu_f[:, 0] - mu_exact).sum(axis=1).mean()
-    d_x_s = np.hypot(*(sm.x[:, 0] - x_exact)[:, [0, 2]].T).mean()
-    d_x_f = np.hypot(*(filtered - x_exact)[:, [0, 2]].T).mean()
+    d_mu_s, d_mu_f, d_x_s, d_x_f = exact_comparison(
+        seed, lambda model, Z, x0, P0, mu0, T, rec: smooth_two_filter(Z, model, x0, P0, mu0, T)
+    )
     assert d_mu_s < 0.2 and d_mu_s < 0.5 * d_mu_f
     assert d_x_s < 30.0 and d_x_s < 0.5 * d_x_f
 
