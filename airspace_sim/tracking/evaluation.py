@@ -473,8 +473,7 @@ def _smoothed_runs(Z, x0, P0, mu0, model: dict, lengths, period_s: float, lag=No
     Rauch–Tung–Striebel smoother, which is exact), or with ``lag`` steps of look-ahead by the
     filter and :func:`airspace_sim.tracking.smoother.smooth`; in batches of flights of similar
     length under :data:`SMOOTHER_BATCH_BYTES` (a batch's record is as long as its longest
-    flight).
-    Re-running the filters costs less than keeping every flight's record from
+    flight). Re-running the filters costs less than keeping every flight's record from
     :func:`evaluate`'s own run at once. Yields ``(flights (b,), L, Smoothed)`` with the
     records of steps ``2..L-1``; ``lengths`` (F,) each flight's number of measured steps,
     ``period_s`` the step (s)."""
@@ -579,12 +578,12 @@ def evaluate(
 
     ``smoother``: also smooth both filters over each whole flight (the IMM with
     :func:`~airspace_sim.tracking.two_filter.smooth_two_filter`, the best CV filter with the
-    RTS smoother) and score the smoothed turn flags and positions (always without
-    a gate): the turns a recorded flight holds, labelled after the fact. ``smoother_lag_s``:
-    fixed-lag smoothers instead (:func:`~airspace_sim.tracking.smoother.smooth` with ``lag``),
-    each step given the measurements up to that many seconds later (rounded to whole steps):
-    the flags of a tracker that reports that late. Not for
-    models with the along-track acceleration (their smoothed fields stay None).
+    RTS smoother) and score the smoothed turn flags and positions (always without a gate):
+    the turns a recorded flight holds, labelled after the fact. ``smoother_lag_s``: fixed-lag
+    smoothers instead (:func:`~airspace_sim.tracking.smoother.smooth` with ``lag``), each step
+    given the measurements up to that many seconds later (rounded to whole steps): the flags
+    of a tracker that reports that late. Not for models with the along-track acceleration
+    (their smoothed fields stay None).
     """
     from airspace_sim.tracking import IMM
 
