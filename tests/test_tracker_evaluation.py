@@ -148,9 +148,7 @@ def test_smoother_batches_stay_under_their_memory_budget(monkeypatch):
 
 def test_fixed_lag_figures_run_from_the_filter_to_the_whole_flight():
     """Lag 0 is the filter (both the IMM's and the CV filter's figures); a lag past the
-    flight's end is the fixed-interval smoother: the RTS smoother for the CV filter, as on
-    the whole-flight line, and for the IMM expectation correction over the whole flight
-    (the whole-flight line's is the two-filter smoother: close to it on this flight)."""
+    flight's end is the fixed-interval smoother."""
     t, X = flight(LEGS[:3], dt=4.0)  # a truth on the 4 s grid
     truths = [evaluation.Truth("f", t, X)]
     kw = dict(seed=2, cv_sigmas=(2.0, 8.0))
@@ -162,8 +160,8 @@ def test_fixed_lag_figures_run_from_the_filter_to_the_whole_flight():
     assert zero.smoothed_turning_flagged == zero.turning_flagged
     assert zero.smoothed_straight_flagged == zero.straight_flagged
     assert far.pos_cv_smoothed == pytest.approx(whole.pos_cv_smoothed, rel=1e-9)
-    assert far.pos_imm_smoothed == pytest.approx(whole.pos_imm_smoothed, rel=0.05)
-    assert far.smoothed_turning_flagged == pytest.approx(whole.smoothed_turning_flagged, abs=0.05)
+    assert far.pos_imm_smoothed == pytest.approx(whole.pos_imm_smoothed, rel=1e-9)
+    assert far.smoothed_turning_flagged == whole.smoothed_turning_flagged
     assert zero.smoother_lag_s == 0.0 and whole.smoother_lag_s is None
     assert any("0 s late" in line for line in zero.lines())
 

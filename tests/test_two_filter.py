@@ -172,3 +172,72 @@ def test_bad_input_is_a_user_error():
         smooth_two_filter(Z, one_sided, x0, P0, presets.realistic(T).mu0(), T)
     with pytest.raises(UserError, match="along-track"):
         smooth_two_filter(Z, presets.imm_cta(T).imm_arguments(), x0, P0, [0.6, 0.3, 0.1], T)
+
+
+def test_fixed_lag_is_the_fixed_interval_smoother_of_the_window(monkeypatch):
+    """Step k with lag L is step k of the fixed-interval smoother over the record up to
+    k + L, or up to the last step before it whose measurement and the one before it are
+    there (a missed detection moves the window's start back); lag 0 is the filter, a lag
+    past the end the fixed-interval smoother; windows run in chunks as one."""
+    from airspace_sim.tracking import two_filter
+
+    monkeypatch.setattr(two_filter, "LAG_WINDOWS", 7)
+    rng = np.random.default_rng(8)
+    T, K, L = 4.0, 24, 3
+    p = presets.imm_ct(T).with_(measurement_sigma=SIGMA)
+    model = p.imm_arguments()
+    Z = straight_then_turn(rng, K, T, rate_deg=2.0, B=2)
+    Z[18:, 1] = np.nan  # the second record ends after 18 steps
+    Z[10, 0] = np.nan  # a missed detection
+    n = np.array([K, 18])
+    x0 = np.tile([0.0, 150.0, 0.0, 40.0, 0.0], (2, 1))
+    P0 = np.tile(np.diag([1e4, 100.0, 1e4, 100.0, 1e-4]), (2, 1, 1))
+    args = (model, x0, P0, p.mu0(), T)
+    lagged = smooth_two_filter(Z, *args, n_steps=n, lag=L)
+    for b in range(2):
+        for k in range(n[b] - 1):
+            end = min(k + L, n[b] - 1)
+            while np.isnan(Z[end, b, 0]) or np.isnan(Z[end - 1, b, 0]):
+                end -= 1
+            if end - 1 < k:
+                np.testing.assert_allclose(lagged.mu[k, b], record(model, Z[: k + 1, b : b + 1],
+                                           x0[b : b + 1], P0[b : b + 1], p.mu0())[0][k, 0])  # fmt: skip
+                continue
+            ref = smooth_two_filter(Z[: end + 1, b : b + 1], model, x0[b : b + 1], P0[b : b + 1],
+                                    p.mu0(), T)  # fmt: skip
+            np.testing.assert_allclose(
+                lagged.x_modes[k, b], ref.x_modes[k, 0], rtol=1e-9, atol=1e-6
+            )
+            np.testing.assert_allclose(lagged.mu[k, b], ref.mu[k, 0], rtol=1e-9, atol=1e-12)
+    filt = smooth_two_filter(Z, *args, n_steps=n, lag=0)
+    rec = record(model, Z, x0, P0, p.mu0())
+    np.testing.assert_array_equal(filt.x_modes, rec[1])
+    whole = smooth_two_filter(Z, *args, n_steps=n)
+    far = smooth_two_filter(Z, *args, n_steps=n, lag=K)
+    np.testing.assert_allclose(far.x_modes, whole.x_modes, rtol=1e-12, atol=1e-9)
+    with pytest.raises(UserError, match="lag"):
+        smooth_two_filter(Z, *args, n_steps=n, lag=-1)
+
+
+def test_more_look_ahead_smooths_better_on_traffic_of_its_own_model():
+    """`realistic`'s own traffic: the fixed-lag smoother's positions improve with the lag up
+    to the fixed-interval ones (expectation correction's get worse from 10 steps on)."""
+    from airspace_sim.dynamics import get_preset, simulate
+    from airspace_sim.tracking import two_point_initialisation
+
+    preset = get_preset("realistic")
+    truth = simulate(preset, n_steps=200, n_targets=40, rng=np.random.default_rng(12))
+    z = truth.measurements
+    x0, P0 = two_point_initialisation(
+        z[0], z[1], preset.dt, preset.measurement_sigma**2 * np.eye(2)
+    )
+    model, mu0 = preset.filter_model().imm_arguments(), preset.filter_model().mu0()
+    true_xy = truth.states[2:, :, [0, 2]]
+    errs = [
+        np.sqrt(np.mean(np.sum((sm.x[..., [0, 2]] - true_xy) ** 2, axis=-1)))
+        for sm in [
+            smooth_two_filter(z[2:], model, x0, P0, mu0, preset.dt, lag=L) for L in (0, 3, 10, 20)
+        ]
+        + [smooth_two_filter(z[2:], model, x0, P0, mu0, preset.dt)]
+    ]
+    assert all(a > b for a, b in zip(errs, errs[1:])), errs

@@ -11,12 +11,12 @@ matched IMM (mode names included) that can step with any time since the last ste
 - gating diagnostics: ``imm.gated`` (B,) says which finite measurements were rejected,
   ``imm.nis`` their NIS and :func:`gate_threshold` the d² a probability gives;
 - :func:`chi2_band`, :func:`nees`, :func:`nis`: consistency statistics;
-- :func:`smooth_two_filter`: the fixed-interval IMM smoother (states and mode probabilities
-  given the whole record: labelling recorded flights after the fact), a forward IMM and one
-  over the time-reversed record fused;
-- :func:`smooth`: the expectation-correction IMM smoother over a forward run's record,
-  fixed-lag (given a few steps more: what a tracker that reports late can say) or
-  fixed-interval;
+- :func:`smooth_two_filter`: the IMM smoother, a forward IMM and one over the time-reversed
+  record fused: fixed-interval (states and mode probabilities given the whole record:
+  labelling recorded flights after the fact) or fixed-lag (given a few steps more: what a
+  tracker that reports late can say);
+- :func:`smooth`: the expectation-correction IMM smoother over a forward run's record alone,
+  fixed-lag (as good up to a few steps) or fixed-interval;
 - :mod:`.coordinated_turn`: the estimated-rate (EKF) mode; :mod:`.evaluation`: trackers
   measured on recorded flights.
 """

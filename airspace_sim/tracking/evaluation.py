@@ -36,10 +36,9 @@ how much of the shortfall is detection delay; and both filters' position errors 
 (:attr:`Evaluation.phases`: in a turn or after one, by the seconds since it began or ended):
 where the IMM gains on the CV filter and where it loses. After the fact
 (``evaluate(smoother=True)``, the default): both filters smoothed over each whole flight
-(the IMM by two filters, :func:`airspace_sim.tracking.two_filter.smooth_two_filter`; the CV
-filter by the RTS smoother), or with a fixed lag (``smoother_lag_s``;
-:func:`airspace_sim.tracking.smoother.smooth`), their position RMSEs and the smoothed IMM's
-turn flags.
+or with a fixed lag (``smoother_lag_s``): the IMM by two filters
+(:func:`airspace_sim.tracking.two_filter.smooth_two_filter`), the CV filter by the RTS
+smoother; their position RMSEs and the smoothed IMM's turn flags.
 
 Flights are given as arrays (times in seconds, east/north positions in metres in a local
 frame), so any reader can feed this module; the ``evaluate-tracker`` command reads files.
@@ -468,10 +467,10 @@ def two_filter_records(n_modes: int) -> int:
 
 def _smoothed_runs(Z, x0, P0, mu0, model: dict, lengths, period_s: float, lag=None):
     """Each flight's measurements Z (T, F, 2) from step 2 on, smoothed by the IMM of
-    ``model``: over the whole flight by two filters
-    (:func:`airspace_sim.tracking.two_filter.smooth_two_filter`; with one mode, the
-    Rauch–Tung–Striebel smoother, which is exact), or with ``lag`` steps of look-ahead by the
-    filter and :func:`airspace_sim.tracking.smoother.smooth`; in batches of flights of similar
+    ``model`` by two filters (:func:`airspace_sim.tracking.two_filter.smooth_two_filter`),
+    over the whole flight or with ``lag`` steps of look-ahead; with one mode by the filter
+    and :func:`airspace_sim.tracking.smoother.smooth` (the Rauch–Tung–Striebel smoother,
+    exact); in batches of flights of similar
     length under :data:`SMOOTHER_BATCH_BYTES` (a batch's record is as long as its longest
     flight). Re-running the filters costs less than keeping every flight's record from
     :func:`evaluate`'s own run at once. Yields ``(flights (b,), L, Smoothed)`` with the
@@ -482,7 +481,7 @@ def _smoothed_runs(Z, x0, P0, mu0, model: dict, lengths, period_s: float, lag=No
     from airspace_sim.tracking.two_filter import smooth_two_filter
 
     M, n = len(mu0), x0.shape[1]
-    two_filter = lag is None and M > 1
+    two_filter = M > 1
     budget = SMOOTHER_BATCH_BYTES // (two_filter_records(M) if two_filter else 1)
     order = np.argsort(lengths, kind="stable")
     i = 0
@@ -495,7 +494,11 @@ def _smoothed_runs(Z, x0, P0, mu0, model: dict, lengths, period_s: float, lag=No
         L = int(lengths[b].max())
         if two_filter:
             n_steps = lengths[b] - 2
-            yield b, L, smooth_two_filter(Z[2:L, b], model, x0[b], P0[b], mu0, period_s, n_steps)
+            yield (
+                b,
+                L,
+                smooth_two_filter(Z[2:L, b], model, x0[b], P0[b], mu0, period_s, n_steps, lag),
+            )
             continue
         imm = IMM(**model, x0=x0[b], P0=P0[b], mu0=mu0, gate_probability=1.0)
         mu, xm, Pm = (np.empty((L - 2, b.size) + tail) for tail in ((M,), (M, n), (M, n, n)))
@@ -580,9 +583,9 @@ def evaluate(
     :func:`~airspace_sim.tracking.two_filter.smooth_two_filter`, the best CV filter with the
     RTS smoother) and score the smoothed turn flags and positions (always without a gate):
     the turns a recorded flight holds, labelled after the fact. ``smoother_lag_s``: fixed-lag
-    smoothers instead (:func:`~airspace_sim.tracking.smoother.smooth` with ``lag``), each step
-    given the measurements up to that many seconds later (rounded to whole steps): the flags
-    of a tracker that reports that late. Not for models with the along-track acceleration
+    smoothers instead (the same, with ``lag``), each step given the measurements up to that
+    many seconds later (rounded to whole steps): the flags of a tracker that reports that
+    late. Not for models with the along-track acceleration
     (their smoothed fields stay None).
     """
     from airspace_sim.tracking import IMM

@@ -47,8 +47,9 @@ unit on the zero diagonal gives exactly.
 Over long records the fixed-interval form loses to its own 10–20-step lag, even on traffic
 of the model itself: where the forward filter keeps some probability on a mode that is not
 flying, that probability rides back on the mode's smoothed estimate after it has run off
-(``docs/tracking.md``, "Two filters"). For the whole record use
-:func:`.two_filter.smooth_two_filter`; this one is the fixed-lag smoother.
+(``docs/tracking.md``, "Two filters"). :func:`.two_filter.smooth_two_filter` does not (it
+needs the measurements, not only the forward record); this one is as good up to a few steps
+of lag.
 
 Memory: the forward pass's K·B·M·n² covariances; callers with long records split the
 trackers into batches (:func:`airspace_sim.tracking.evaluation.evaluate` does).

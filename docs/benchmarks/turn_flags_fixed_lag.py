@@ -7,7 +7,8 @@ DIR holds the traffic 2.8.1 ``calibration/*.json.gz`` samples or is one collecti
 (never committed), split as ``tune_tracker.py`` splits them; measurements as
 ``evaluation.evaluate`` draws them (seed 0). A causal tracker confirms a turn only once it has
 bent the track beyond the noise; a tracker that may report ``lag`` seconds late uses the
-measurements up to then (``tracking.smooth(..., lag=steps)``). Printed per lag: turning
+measurements up to then (``tracking.smooth_two_filter(..., lag=steps)``; before 2026-12-08
+``tracking.smooth(..., lag=steps)``, expectation correction). Printed per lag: turning
 seconds flagged with the right sign / with the wrong sign / straight seconds flagged (the
 flag rule and the seconds of ``evaluate``), and the position RMSE. Lag 0 is the filter,
 "inf" the fixed-interval (two-filter) smoother. Each lag of L steps costs L backward passes. First, how
