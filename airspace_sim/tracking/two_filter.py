@@ -136,6 +136,25 @@ def rate_prior_variance(model: dict) -> np.ndarray:
     return np.where(est, s2, np.nan)
 
 
+def _backward(model: dict):
+    """What every backward filter shares: the reversed model's IMM arguments, perm (M,) (its
+    mode perm[j] is forward mode j), its start's mode probabilities (the stationary ones, in
+    its labels) and turn-rate variance (rad/s)²."""
+    rmodel, perm, p = reversed_model(model)
+    s2 = rate_prior_variance(model)
+    omega_var = float(np.nanmax(s2)) if np.isfinite(s2).any() else 1e-6
+    return rmodel, perm, p[np.argsort(perm)], omega_var
+
+
+def _to_forward(mu, x, P, perm):
+    """Backward posteriors (..., M), (..., M, 5), (..., M, 5, 5) in forward time and labels."""
+    return (
+        mu[..., perm],
+        x[..., perm, :] * REVERSAL,
+        P[..., perm, :, :] * np.outer(REVERSAL, REVERSAL),
+    )
+
+
 def _run(imm, z):
     """Step ``imm`` through z (K, B, m); its records μ (K, B, M), x^j, P^j after every step."""
     K = z.shape[0]
@@ -223,17 +242,14 @@ def smooth_two_filter(
             )
         return _fixed_lag(z, model, (mu_f, x_f, P_f), n_steps, int(lag), dt)
 
-    rmodel, perm, p = reversed_model(model)
-    s2 = rate_prior_variance(model)
+    rmodel, perm, mu0_b, omega_var = _backward(model)
     M = mu0.size
-    back_omega_var = float(np.nanmax(s2)) if np.isfinite(s2).any() else 1e-6
     t = np.arange(K)[:, None]
     src = n_steps[None, :] - 1 - t  # reversed step t is forward step n - 1 - t
     zr = np.where((src >= 0)[..., None], z[np.clip(src, 0, K - 1), rows[None]], np.nan)
     ok_end = np.where(long_enough[:, None], ends, 0.0)
     # the last two measurements in reversed order: the reversed state at step n - 2
-    xb0, Pb0 = two_point_initialisation(ok_end[0], ok_end[1], dt, R, 0.0, back_omega_var)
-    mu0_b = p[np.argsort(perm)]
+    xb0, Pb0 = two_point_initialisation(ok_end[0], ok_end[1], dt, R, 0.0, omega_var)
     mu_r, x_r, P_r = _run(IMM(**rmodel, x0=xb0, P0=Pb0, mu0=mu0_b, gate_probability=1.0), zr[2:])
     # reversed step 1 is the start itself: the last two measurements, no mode information
     mu_r = np.concatenate([np.broadcast_to(mu0_b, (1, B, M)), mu_r])
@@ -242,9 +258,9 @@ def smooth_two_filter(
     # back to forward time and labels: reversed step t >= 1 is forward step k = n - 1 - t
     tt = np.clip(n_steps[None, :] - 1 - np.arange(K)[:, None], 1, K - 1) - 1  # (K, B)
     have = (np.arange(K)[:, None] <= n_steps[None, :] - 2) & long_enough[None, :]
-    mu_b = mu_r[tt, rows[None]][..., perm]
-    x_b = x_r[tt, rows[None]][..., perm, :] * REVERSAL
-    P_b = P_r[tt, rows[None]][..., perm, :, :] * np.outer(REVERSAL, REVERSAL)
+    mu_b, x_b, P_b = _to_forward(
+        mu_r[tt, rows[None]], x_r[tt, rows[None]], P_r[tt, rows[None]], perm
+    )
 
     mu_s, x_s, P_s = fuse(mu_f, x_f, P_f, mu_b, x_b, P_b, have, z, model)
     return Smoothed(mu_s, x_s, P_s)
@@ -264,10 +280,7 @@ def _fixed_lag(z, model, forward, n_steps, lag: int, dt: float) -> Smoothed:
     mu_f, x_f, P_f = forward
     K, B = mu_f.shape[:2]
     R = np.asarray(model["measurement_noise"], dtype=float)
-    rmodel, perm, p = reversed_model(model)
-    s2 = rate_prior_variance(model)
-    back_omega_var = float(np.nanmax(s2)) if np.isfinite(s2).any() else 1e-6
-    mu0_b = p[np.argsort(perm)]
+    rmodel, perm, mu0_b, omega_var = _backward(model)
     M = mu0_b.size
     steps = np.arange(K)[:, None]
     measured = np.all(np.isfinite(z), axis=-1)
@@ -282,7 +295,7 @@ def _fixed_lag(z, model, forward, n_steps, lag: int, dt: float) -> Smoothed:
         k, b, end = (a[lo : lo + LAG_WINDOWS] for a in (kk, bb, e))
         W = k.size
         cap = end - 1 - k  # backward steps from its start (at end - 1) to k
-        xb0, Pb0 = two_point_initialisation(z[end, b], z[end - 1, b], dt, R, 0.0, back_omega_var)
+        xb0, Pb0 = two_point_initialisation(z[end, b], z[end - 1, b], dt, R, 0.0, omega_var)
         mu_b = np.broadcast_to(mu0_b, (W, M)).copy()
         x_b = np.broadcast_to(xb0[:, None], (W, M, 5)).copy()
         P_b = np.broadcast_to(Pb0[:, None], (W, M, 5, 5)).copy()
@@ -293,10 +306,8 @@ def _fixed_lag(z, model, forward, n_steps, lag: int, dt: float) -> Smoothed:
             imm.step(zs)
             at = cap == step
             mu_b[at], x_b[at], P_b[at] = imm.mu[at], imm.x_modes[at], imm.P_modes[at]
-        mu_b, x_b = mu_b[:, perm], x_b[:, perm] * REVERSAL
-        P_b = P_b[:, perm] * np.outer(REVERSAL, REVERSAL)
-        fused = fuse(mu_f[k, b], x_f[k, b], P_f[k, b], mu_b, x_b, P_b, np.ones(W, bool),
-                     z[k, b], model)  # fmt: skip
+        backward = _to_forward(mu_b, x_b, P_b, perm)
+        fused = fuse(mu_f[k, b], x_f[k, b], P_f[k, b], *backward, np.ones(W, bool), z[k, b], model)
         mu_s[k, b], x_s[k, b], P_s[k, b] = fused
     return Smoothed(mu_s, x_s, P_s)
 
