@@ -128,11 +128,10 @@ def rate_prior_variance(model: dict) -> np.ndarray:
     M = len(model["transition_matrix"])
     est = model.get("estimated_turn_rate")
     est = np.zeros(M, bool) if est is None else np.asarray(est, dtype=bool)
-    Q = np.broadcast_to(np.asarray(model["process_noise"], dtype=float), (M,) + (5, 5))
+    Q = np.broadcast_to(np.asarray(model["process_noise"], dtype=float), (M, 5, 5))
     stay = np.diagonal(np.asarray(model["transition_matrix"], dtype=float))
-    w = models.TURN_RATE
-    with np.errstate(divide="ignore"):
-        s2 = Q[:, w, w] / np.maximum(1.0 - stay, np.finfo(float).tiny)
+    om = models.TURN_RATE
+    s2 = Q[:, om, om] / np.maximum(1.0 - stay, np.finfo(float).tiny)
     return np.where(est, s2, np.nan)
 
 
