@@ -85,6 +85,19 @@ def transition_matrix_from_sojourn(sojourn_s, dt: float, switch_probabilities=No
     return validate_transition_matrix(Pi)
 
 
+def stationary_law(transition_matrix) -> np.ndarray:
+    """(M,) the chain's stationary law: ``p Π = p``, ``Σ p = 1``, for a row-stochastic Π
+    (M, M) (least squares, so a chain with several closed classes still gets an answer;
+    round-off negatives are clipped)."""
+    Pi = np.asarray(transition_matrix, dtype=float)
+    M = Pi.shape[0]
+    A = np.vstack([Pi.T - np.eye(M), np.ones((1, M))])
+    b = np.zeros(M + 1)
+    b[-1] = 1.0
+    p = np.clip(np.linalg.lstsq(A, b, rcond=None)[0], 0.0, None)
+    return p / p.sum()
+
+
 def mode_cdf(transition_matrix) -> np.ndarray:
     """Row-wise cumulative Π (M, M), each row divided by its last entry so that it ends at
     exactly 1 (a zero-probability mode, trailing ones included, is never drawn)."""

@@ -250,20 +250,11 @@ class Preset:
         return u
 
     def mu0(self) -> np.ndarray:
-        """Initial mode probabilities (M,): the given ones, else the chain's stationary law.
-
-        The stationary law solves ``p Π = p``, ``Σ p = 1`` (least squares, so a chain with
-        several closed classes still gets an answer); round-off negatives are clipped.
-        """
+        """Initial mode probabilities (M,): the given ones, else the chain's stationary law
+        (:func:`~airspace_sim.dynamics.markov.stationary_law`)."""
         if self.initial_mode_probabilities is not None:
             return np.asarray(self.initial_mode_probabilities, dtype=float)
-        Pi = np.asarray(self.transition_matrix, dtype=float)
-        M = Pi.shape[0]
-        A = np.vstack([Pi.T - np.eye(M), np.ones((1, M))])
-        b = np.zeros(M + 1)
-        b[-1] = 1.0
-        p = np.clip(np.linalg.lstsq(A, b, rcond=None)[0], 0.0, None)
-        return p / p.sum()
+        return markov.stationary_law(self.transition_matrix)
 
     def filter_model(self) -> Preset:
         """The model the tracker assumes: :attr:`tracker` at this preset's ``dt`` and

@@ -56,6 +56,7 @@ import math
 import numpy as np
 
 from airspace_sim.dynamics import models
+from airspace_sim.dynamics.markov import stationary_law
 from airspace_sim.errors import UserError
 from airspace_sim.tracking.initialisation import two_point_initialisation
 from airspace_sim.tracking.smoother import Smoothed
@@ -64,14 +65,6 @@ from airspace_sim.tracking.smoother import Smoothed
 REVERSAL = np.array([1.0, -1.0, 1.0, -1.0, -1.0])
 #: The reflection ``y → −y`` of ``[x, vx, y, vy, Ω]``: a turn at ω becomes a turn at −ω.
 MIRROR = np.array([1.0, 1.0, -1.0, -1.0, -1.0])
-
-
-def stationary(transition_matrix) -> np.ndarray:
-    """(M,) the stationary distribution p of a row-stochastic Π (M, M): ``p Π = p``."""
-    Pi = np.asarray(transition_matrix, dtype=float)
-    w, v = np.linalg.eig(Pi.T)
-    p = np.abs(np.real(v[:, np.argmin(np.abs(w - 1.0))]))
-    return p / p.sum()
 
 
 def mirror_modes(model: dict) -> np.ndarray:
@@ -113,7 +106,7 @@ def reversed_model(model: dict):
     distribution."""
     perm = mirror_modes(model)
     Pi = np.asarray(model["transition_matrix"], dtype=float)
-    p = stationary(Pi)
+    p = stationary_law(Pi)
     rev = Pi.T * p[None, :] / np.maximum(p[:, None], np.finfo(float).tiny)
     rev /= rev.sum(axis=1, keepdims=True)
     back = np.argsort(perm)  # reversed label a is forward mode back[a]
@@ -322,7 +315,7 @@ def fuse(mu_f, x_f, P_f, mu_b, x_b, P_b, have, z, model: dict):
     est = model.get("estimated_turn_rate")
     est = np.zeros(M, bool) if est is None else np.asarray(est, dtype=bool)
     Pi = np.asarray(model["transition_matrix"], dtype=float)
-    p = stationary(Pi)
+    p = stationary_law(Pi)
     s2 = rate_prior_variance(model)
     R = np.asarray(model["measurement_noise"], dtype=float)
     H = np.asarray(model["measurement_matrix"], dtype=float)
