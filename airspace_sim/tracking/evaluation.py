@@ -477,7 +477,7 @@ def _smoothed_runs(Z, x0, P0, mu0, model: dict, lengths, period_s: float, lag=No
     records of steps ``2..L-1``; ``lengths`` (F,) each flight's number of measured steps,
     ``period_s`` the step (s)."""
     from airspace_sim.tracking import IMM
-    from airspace_sim.tracking.smoother import smooth
+    from airspace_sim.tracking.smoother import forward_record, smooth
     from airspace_sim.tracking.two_filter import smooth_two_filter
 
     M, n = len(mu0), x0.shape[1]
@@ -501,11 +501,8 @@ def _smoothed_runs(Z, x0, P0, mu0, model: dict, lengths, period_s: float, lag=No
             )
             continue
         imm = IMM(**model, x0=x0[b], P0=P0[b], mu0=mu0, gate_probability=1.0)
-        mu, xm, Pm = (np.empty((L - 2, b.size) + tail) for tail in ((M,), (M, n), (M, n, n)))
-        for k in range(2, L):
-            imm.step(Z[k, b])
-            mu[k - 2], xm[k - 2], Pm[k - 2] = imm.mu, imm.x_modes, imm.P_modes
-        yield b, L, smooth(mu, xm, Pm, model, n_steps=lengths[b] - 2, lag=lag)
+        rec = forward_record(imm, Z[2:L, b])
+        yield b, L, smooth(*rec, model, n_steps=lengths[b] - 2, lag=lag)
 
 
 def _right_flags(p_left, p_right, X):

@@ -81,6 +81,19 @@ class Smoothed(NamedTuple):
         return np.einsum("kbm,kbmn->kbn", self.mu, self.x_modes)
 
 
+def forward_record(imm, z):
+    """Step ``imm`` (an :class:`~airspace_sim.tracking.IMM`) through the measurements z
+    (K, B, m): its record μ (K, B, M), x^j (K, B, M, n), P^j (K, B, M, n, n) after every
+    step, what the smoothers take."""
+    K = z.shape[0]
+    B, M, n = imm.x_modes.shape
+    mu, x, P = np.empty((K, B, M)), np.empty((K, B, M, n)), np.empty((K, B, M, n, n))
+    for k in range(K):
+        imm.step(z[k])
+        mu[k], x[k], P[k] = imm.mu, imm.x_modes, imm.P_modes
+    return mu, x, P
+
+
 def _predictions(x, P, F, Q, U, estimated, T):
     """Every filtered mode j through every mode i's model.
 

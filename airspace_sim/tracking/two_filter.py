@@ -59,7 +59,7 @@ from airspace_sim.dynamics import models
 from airspace_sim.dynamics.markov import stationary_law
 from airspace_sim.errors import UserError
 from airspace_sim.tracking.initialisation import two_point_initialisation
-from airspace_sim.tracking.smoother import Smoothed
+from airspace_sim.tracking.smoother import Smoothed, forward_record
 
 #: Time reversal of ``[x, vx, y, vy, Ω]``: the velocity and the turn rate change sign.
 REVERSAL = np.array([1.0, -1.0, 1.0, -1.0, -1.0])
@@ -147,17 +147,6 @@ def _to_forward(mu, x, P, perm):
     )
 
 
-def _run(imm, z):
-    """Step ``imm`` through z (K, B, m); its records μ (K, B, M), x^j, P^j after every step."""
-    K = z.shape[0]
-    B, M, n = imm.x_modes.shape
-    mu, x, P = np.empty((K, B, M)), np.empty((K, B, M, n)), np.empty((K, B, M, n, n))
-    for k in range(K):
-        imm.step(z[k])
-        mu[k], x[k], P[k] = imm.mu, imm.x_modes, imm.P_modes
-    return mu, x, P
-
-
 def _log_gauss(x, mean, cov):
     """log N(x; mean, cov) over the last axis; x, mean (..., d), cov (..., d, d)."""
     d = x - mean
@@ -226,7 +215,7 @@ def smooth_two_filter(
         )
     R = np.asarray(model["measurement_noise"], dtype=float)
     mu0 = np.asarray(mu0, dtype=float)
-    mu_f, x_f, P_f = _run(IMM(**model, x0=x0, P0=P0, mu0=mu0, gate_probability=1.0), z)
+    mu_f, x_f, P_f = forward_record(IMM(**model, x0=x0, P0=P0, mu0=mu0, gate_probability=1.0), z)
     if lag is not None:
         if isinstance(lag, bool) or not isinstance(lag, (int, np.integer)) or lag < 0:
             raise UserError(
@@ -242,7 +231,9 @@ def smooth_two_filter(
     ok_end = np.where(long_enough[:, None], ends, 0.0)
     # the last two measurements in reversed order: the reversed state at step n - 2
     xb0, Pb0 = two_point_initialisation(ok_end[0], ok_end[1], dt, R, 0.0, omega_var)
-    mu_r, x_r, P_r = _run(IMM(**rmodel, x0=xb0, P0=Pb0, mu0=mu0_b, gate_probability=1.0), zr[2:])
+    mu_r, x_r, P_r = forward_record(
+        IMM(**rmodel, x0=xb0, P0=Pb0, mu0=mu0_b, gate_probability=1.0), zr[2:]
+    )
     # reversed step 1 is the start itself: the last two measurements, no mode information
     mu_r = np.concatenate([np.broadcast_to(mu0_b, (1, B, M)), mu_r])
     x_r = np.concatenate([np.broadcast_to(xb0[None, :, None], (1, B, M, 5)), x_r])
