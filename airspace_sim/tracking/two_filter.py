@@ -316,9 +316,23 @@ def fuse(mu_f, x_f, P_f, mu_b, x_b, P_b, have, z, model: dict):
         log_f, log_b = np.log(mu_f), np.log(mu_b) - np.log(p)
     log_joint = np.full(mu_f.shape + (M,), -np.inf)  # (j at the step, i flying on from it)
     x_s, P_s = x_f.copy(), P_f.copy()
+    five, four = np.arange(5), np.arange(4)
+    # each filter's mode posteriors over the components they share, once per mode
+    fwd = [_gaussian(x_f[..., j, :], P_f[..., j, :, :], five if est[j] else four, have)
+           for j in range(M)]  # fmt: skip
+    bwd = {(i, d.size): _gaussian(x_b[..., i, :], P_b[..., i, :, :], d, have)
+           for i in range(M) for d in ((five, four) if est[i] else (four,))}  # fmt: skip
     for j in range(M):
-        pairs = [_fuse_pair(x_f[..., j, :], P_f[..., j, :, :], x_b[..., i, :], P_b[..., i, :, :],
-                            est[j], est[i], s2[i], have, meas) for i in range(M)]  # fmt: skip
+        pairs = []
+        for i in range(M):
+            if est[i] and not est[j]:  # the backward rate conditioned on the forward pinned one
+                back, extra = _conditioned(x_b[..., i, :], P_b[..., i, :, :], x_f[..., j, 4],
+                                           s2[i], have)  # fmt: skip
+            else:
+                back, extra = bwd[i, 5 if est[i] and est[j] else 4], 0.0
+            prior = s2[i] if est[i] and est[j] else None
+            pairs.append(_fuse_pair(x_f[..., j, :], P_f[..., j, :, :], fwd[j], back, extra,
+                                    prior, have, meas))  # fmt: skip
         with np.errstate(divide="ignore"):
             log_pi = np.log(Pi[j])
         for i, (log_c, _, _) in enumerate(pairs):
@@ -344,15 +358,55 @@ def fuse(mu_f, x_f, P_f, mu_b, x_b, P_b, have, z, model: dict):
     return np.where(fused[..., None], mu_s, mu_f), x_s, P_s
 
 
-def _fuse_pair(xf, Pf, xb, Pb, est_f, est_b, s2_b, have, meas):
+def _gaussian(x, P, dims, have):
+    """A posterior over the components ``dims``: mean (..., d), covariance, information
+    (its inverse) and log-determinant; the unit Gaussian where ``have`` is False."""
+    eye = np.eye(dims.size)
+    P = np.where(have[..., None, None], P[..., dims[:, None], dims], eye)
+    return (
+        np.where(have[..., None], x[..., dims], 0.0),
+        P,
+        np.linalg.inv(P),
+        np.linalg.slogdet(P)[1],
+    )
+
+
+def _conditioned(xb, Pb, w0, s2_b, have):
+    """The backward posterior of an estimated-rate mode conditioned on the forward mode's
+    pinned rate ``w0`` (...): its position–velocity Gaussian (as :func:`_gaussian`) and the
+    log of its rate density at ``w0`` over its prior's."""
+    pv = np.arange(4)
+    var = np.maximum(Pb[..., 4, 4], np.finfo(float).tiny)
+    gain = Pb[..., pv, 4] / var[..., None]
+    x = xb[..., pv] + gain * (w0 - xb[..., 4])[..., None]
+    P = Pb[..., pv[:, None], pv] - gain[..., :, None] * Pb[..., 4, pv][..., None, :]
+    extra = _log_gauss(w0[..., None], xb[..., 4:], var[..., None, None]) - _log_gauss(
+        w0[..., None], np.zeros(1), np.array([[s2_b]])
+    )
+    x5, P5 = np.zeros(xb.shape), np.zeros(Pb.shape)
+    x5[..., pv], P5[..., pv[:, None], pv] = x, P
+    return _gaussian(x5, P5, pv, have), np.where(have, extra, 0.0)
+
+
+def _log_gauss_info(x, mean, J, logdet):
+    """log N(x; mean, P) with P's information J and log-determinant given."""
+    d = x - mean
+    maha = np.einsum("...i,...i->...", d, np.einsum("...ij,...j->...i", J, d))
+    return -0.5 * (maha + logdet + d.shape[-1] * math.log(2 * math.pi))
+
+
+def _fuse_pair(xf, Pf, fwd, back, extra, prior_var, have, meas):
     """Fuse forward mode j's posterior at k with backward mode i's (i the mode of step
     k + 1, which the reversed filter flew from k + 1 back to k).
 
-    xf, xb (K, B, 5), Pf, Pb (K, B, 5, 5); ``est_f``, ``est_b`` whether each mode estimates
-    Ω; ``s2_b`` backward mode i's turn-rate prior variance; ``have`` (K, B) where the
-    backward filter has an estimate; ``meas`` (z (K, B, m), measured (K, B), H, R⁻¹, R).
-    Returns log c (K, B), the integral of ``N_f N_b / (N(z_k; Hx, R) p_0)`` (−inf where no
-    fusion), and the fused x (K, B, 5), P (K, B, 5, 5).
+    xf (..., 5), Pf (..., 5, 5) forward mode j's posterior; ``fwd``, ``back`` the two
+    Gaussians over the components they share (:func:`_gaussian`: the forward mode's free
+    ones, the backward one's first 4 or all 5 of them); ``extra`` (...) a log factor of the
+    backward side (:func:`_conditioned`); ``prior_var`` the backward filter's turn-rate
+    prior variance to divide out when both estimate Ω, else None; ``have`` (...) where the
+    backward filter has an estimate; ``meas`` (z (..., m), measured (...), H, R⁻¹, R).
+    Returns log c (...), the integral of ``N_f N_b / (N(z_k; Hx, R) p_0)`` (−inf where no
+    fusion), and the fused x (..., 5), P (..., 5, 5).
 
     Ω: a mode that pins it (straight or known-rate) holds it at its value (forward) or
     says nothing of the rate at k (backward: mode i moves the aircraft from k with Ω_k only
@@ -360,53 +414,36 @@ def _fuse_pair(xf, Pf, xb, Pb, est_f, est_b, s2_b, have, meas):
     conditioned on the forward value.
     """
     z, measured, H, Ri, R = meas
-    pv = np.arange(4)
-    U = np.arange(5) if est_f else pv  # the fused components: the forward mode's free ones
-    extra = np.zeros(have.shape)
-    xb_u, Pb_u = xb[..., pv], Pb[..., pv[:, None], pv]
-    if est_b and est_f:
-        xb_u, Pb_u = xb, Pb
-    elif est_b:  # condition the backward Gaussian on the forward mode's pinned rate
-        w0 = xf[..., 4]
-        var = np.maximum(Pb[..., 4, 4], np.finfo(float).tiny)
-        gain = Pb[..., pv, 4] / var[..., None]
-        xb_u = xb[..., pv] + gain * (w0 - xb[..., 4])[..., None]
-        Pb_u = Pb_u - gain[..., :, None] * Pb[..., 4, pv][..., None, :]
-        extra = _log_gauss(w0[..., None], xb[..., 4:], var[..., None, None]) - _log_gauss(
-            w0[..., None], np.zeros(1), np.array([[s2_b]])
-        )
-    d = U.size
+    xf_u, Pf_u, Jf, logdet_f = fwd
+    xb_u, _, Jb, logdet_b = back
+    d, nb = xf_u.shape[-1], xb_u.shape[-1]
+    U = np.arange(d)  # the forward mode's free components: the first 4 or all 5
     eye = np.eye(d)
-    Pf_u = np.where(have[..., None, None], Pf[..., U[:, None], U], eye)
-    Pb_u = np.where(have[..., None, None], Pb_u, np.eye(xb_u.shape[-1]))
-    xf_u, xb_u = xf[..., U], np.where(have[..., None], xb_u, 0.0)
-    Jf, Jb = np.linalg.inv(Pf_u), np.linalg.inv(Pb_u)
     Hu = H[:, U]
     J = Jf.copy()
-    nb = xb_u.shape[-1]
     J[..., :nb, :nb] += Jb
     J -= measured[..., None, None] * (Hu.T @ Ri @ Hu)
     h = np.einsum("...ij,...j->...i", Jf, xf_u)
     h[..., :nb] += np.einsum("...ij,...j->...i", Jb, xb_u)
     h -= z @ (Ri @ Hu)
-    if est_b and est_f:  # the backward filter's own prior on the rate, divided out
-        J[..., 4, 4] -= 1.0 / s2_b
+    if prior_var is not None:  # the backward filter's own prior on the rate, divided out
+        J[..., 4, 4] -= 1.0 / prior_var
     J = np.where(have[..., None, None], J, eye)
-    sign, logdet = np.linalg.slogdet(J)
-    pd = have & (sign > 0) & np.all(np.linalg.eigvalsh(J) > 0, axis=-1)
+    pd = have & np.all(np.linalg.eigvalsh(J) > 0, axis=-1)
     J = np.where(pd[..., None, None], J, eye)
+    logdet = np.linalg.slogdet(J)[1]
     x = np.linalg.solve(J, h[..., None])[..., 0]
     resid = z - x @ Hu.T
     log_c = (
-        _log_gauss(x, xf_u, Pf_u)
-        + _log_gauss(x[..., :nb], xb_u, Pb_u)
+        _log_gauss_info(x, xf_u, Jf, logdet_f)
+        + _log_gauss_info(x[..., :nb], xb_u, Jb, logdet_b)
         - np.where(measured, _log_gauss(resid, np.zeros(z.shape[-1]), R), 0.0)
         + 0.5 * d * math.log(2 * math.pi)
         - 0.5 * logdet
         + extra
     )
-    if est_b and est_f:
-        log_c -= _log_gauss(x[..., 4:], np.zeros(1), np.array([[s2_b]]))
+    if prior_var is not None:
+        log_c -= _log_gauss(x[..., 4:], np.zeros(1), np.array([[prior_var]]))
     xs, Ps = xf.copy(), Pf.copy()
     xs[..., U] = np.where(pd[..., None], x, xf_u)
     Ps[..., U[:, None], U] = np.where(pd[..., None, None], np.linalg.inv(J), Pf_u)
