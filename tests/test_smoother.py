@@ -57,6 +57,13 @@ def straight_then_turn(rng, K, T, rate_deg=3.0, B=1, with_path=False):
     return (np.array(zs), np.array(path)) if with_path else np.array(zs)
 
 
+def start(B, omega_var=1e-4):
+    """x0 (B, 5), P0 (B, 5, 5): trackers started at :func:`straight_then_turn`'s aircraft,
+    100 m and 10 m/s sd, Ω = 0 with variance ``omega_var``."""
+    x0 = np.tile([0.0, 150.0, 0.0, 40.0, 0.0], (B, 1))
+    return x0, np.tile(np.diag([1e4, 100.0, 1e4, 100.0, omega_var]), (B, 1, 1))
+
+
 def cv_model(sigma_a, T):
     """A one-mode constant-velocity model's IMM arguments."""
     F, Q = models.constant_velocity(T), models.white_noise_acceleration(sigma_a, T, 1e-3)
@@ -127,8 +134,7 @@ def test_identical_modes_give_the_rts_smoother_whatever_their_probabilities():
                  process_noise=np.repeat(one["process_noise"], 3, 0),
                  transition_matrix=[[0.8, 0.15, 0.05], [0.1, 0.7, 0.2], [0.3, 0.3, 0.4]])  # fmt: skip
     Z = straight_then_turn(rng, K, T, B=2)
-    x0 = np.tile([0.0, 150.0, 0.0, 40.0, 0.0], (2, 1))
-    P0 = np.tile(np.diag([1e4, 100.0, 1e4, 100.0, 1e-4]), (2, 1, 1))
+    x0, P0 = start(2)
     ref = smooth(*record(one, Z, x0, P0, [1.0]), one)
     sm = smooth(*record(three, Z, x0, P0, [0.2, 0.5, 0.3]), three)
     for j in range(3):
@@ -249,8 +255,7 @@ def test_records_of_different_lengths_smooth_as_each_alone():
     model = p.imm_arguments()
     Z = straight_then_turn(rng, K, T, rate_deg=2.0, B=2)
     Z[20:, 1] = np.nan  # the second record ends after 20 steps
-    x0 = np.tile([0.0, 150.0, 0.0, 40.0, 0.0], (2, 1))
-    P0 = np.tile(np.diag([1e4, 100.0, 1e4, 100.0, 1e-4]), (2, 1, 1))
+    x0, P0 = start(2)
     both = smooth(*record(model, Z, x0, P0, p.mu0()), model, n_steps=np.array([K, 20]))
     alone = smooth(*record(model, Z[:20, 1:], x0[1:], P0[1:], p.mu0()), model)
     np.testing.assert_allclose(both.x_modes[:20, 1], alone.x_modes[:, 0], rtol=1e-9, atol=1e-6)
@@ -272,8 +277,7 @@ def test_fixed_lag_is_the_fixed_interval_smoother_of_the_record_so_far(monkeypat
     model = p.imm_arguments()
     Z = straight_then_turn(rng, K, T, rate_deg=2.0, B=2)
     Z[18:, 1] = np.nan
-    x0 = np.tile([0.0, 150.0, 0.0, 40.0, 0.0], (2, 1))
-    P0 = np.tile(np.diag([1e4, 100.0, 1e4, 100.0, 1e-4]), (2, 1, 1))
+    x0, P0 = start(2)
     rec = record(model, Z, x0, P0, p.mu0())
     n = np.array([K, 18])
     lagged = smooth(*rec, model, n_steps=n, lag=L)
@@ -302,8 +306,7 @@ def test_missed_detections_smooth_through():
     model = p.imm_arguments()
     Z, path = straight_then_turn(rng, K, T, rate_deg=2.0, B=B, with_path=True)
     Z[rng.random((K, B)) < 0.2] = np.nan
-    x0 = np.tile([0.0, 150.0, 0.0, 40.0, 0.0], (B, 1))
-    P0 = np.tile(np.diag([1e4, 100.0, 1e4, 100.0, 1e-4]), (B, 1, 1))
+    x0, P0 = start(B)
     rec = record(model, Z, x0, P0, p.mu0())
     sm = smooth(*rec, model)
     assert np.all(np.isfinite(sm.x)) and np.allclose(sm.mu.sum(axis=2), 1.0)

@@ -23,7 +23,7 @@ import pytest
 
 filterpy = pytest.importorskip("filterpy")
 from filterpy.kalman import KalmanFilter  # noqa: E402
-from test_smoother import SIGMA, cv_model, exact_comparison, record, straight_then_turn  # noqa: E402
+from test_smoother import SIGMA, cv_model, exact_comparison, record, start, straight_then_turn  # noqa: E402
 
 from airspace_sim.dynamics import presets  # noqa: E402
 from airspace_sim.dynamics.markov import stationary_law  # noqa: E402
@@ -101,8 +101,7 @@ def test_a_reflected_record_smooths_to_the_reflection():
     p = presets.realistic(T).with_(measurement_sigma=SIGMA)
     model = p.imm_arguments()
     Z = straight_then_turn(rng, K, T, rate_deg=3.0, B=2)
-    x0 = np.tile([0.0, 150.0, 0.0, 40.0, 0.0], (2, 1))
-    P0 = np.tile(np.diag([1e4, 100.0, 1e4, 100.0, 1e-6]), (2, 1, 1))
+    x0, P0 = start(2, omega_var=1e-6)
     sm = smooth_two_filter(Z, model, x0, P0, p.mu0(), T)
     ref = smooth_two_filter(Z * [1, -1], model, x0 * MIRROR, P0, p.mu0(), T)
     perm = mirror_modes(model)
@@ -137,8 +136,7 @@ def test_records_of_different_lengths_and_missed_detections():
     Z, path = straight_then_turn(rng, K, T, rate_deg=2.0, B=2, with_path=True)
     Z[[5, 9, 14], 0] = np.nan  # missed detections
     Z[20:, 1] = np.nan  # the second record ends after 20 steps
-    x0 = np.tile([0.0, 150.0, 0.0, 40.0, 0.0], (2, 1))
-    P0 = np.tile(np.diag([1e4, 100.0, 1e4, 100.0, 1e-4]), (2, 1, 1))
+    x0, P0 = start(2)
     both = smooth_two_filter(Z, model, x0, P0, p.mu0(), T, n_steps=np.array([K, 20]))
     alone = smooth_two_filter(Z[:20, 1:], model, x0[1:], P0[1:], p.mu0(), T)
     np.testing.assert_allclose(both.x_modes[:20, 1], alone.x_modes[:, 0], rtol=1e-9, atol=1e-6)
@@ -190,8 +188,7 @@ def test_fixed_lag_is_the_fixed_interval_smoother_of_the_window(monkeypatch):
     Z[18:, 1] = np.nan  # the second record ends after 18 steps
     Z[10, 0] = np.nan  # a missed detection
     n = np.array([K, 18])
-    x0 = np.tile([0.0, 150.0, 0.0, 40.0, 0.0], (2, 1))
-    P0 = np.tile(np.diag([1e4, 100.0, 1e4, 100.0, 1e-4]), (2, 1, 1))
+    x0, P0 = start(2)
     args = (model, x0, P0, p.mu0(), T)
     lagged = smooth_two_filter(Z, *args, n_steps=n, lag=L)
     for b in range(2):
