@@ -453,8 +453,8 @@ def turn_probabilities(mu, x_modes, P_modes, known, turning_modes, rate):
 
 
 #: Memory (bytes) a batch of flights' smoothing may take: the forward record's K·B·M·n²
-#: covariances for fixed-lag smoothing, and :func:`two_filter_records` times that for two
-#: filters; flights are batched by length under it.
+#: covariances for a one-mode filter (the RTS smoother), :func:`two_filter_records` times
+#: that for an IMM's two filters; flights are batched by length under it.
 SMOOTHER_BATCH_BYTES = 2**27
 
 
@@ -470,9 +470,8 @@ def _smoothed_runs(Z, x0, P0, mu0, model: dict, lengths, period_s: float, lag=No
     ``model`` by two filters (:func:`airspace_sim.tracking.two_filter.smooth_two_filter`),
     over the whole flight or with ``lag`` steps of look-ahead; with one mode by the filter
     and :func:`airspace_sim.tracking.smoother.smooth` (the Rauch–Tung–Striebel smoother,
-    exact); in batches of flights of similar
-    length under :data:`SMOOTHER_BATCH_BYTES` (a batch's record is as long as its longest
-    flight). Re-running the filters costs less than keeping every flight's record from
+    exact); in batches of flights of similar length under :data:`SMOOTHER_BATCH_BYTES` (a
+    batch's record is as long as its longest flight). Re-running the filters costs less than keeping every flight's record from
     :func:`evaluate`'s own run at once. Yields ``(flights (b,), L, Smoothed)`` with the
     records of steps ``2..L-1``; ``lengths`` (F,) each flight's number of measured steps,
     ``period_s`` the step (s)."""
@@ -492,17 +491,13 @@ def _smoothed_runs(Z, x0, P0, mu0, model: dict, lengths, period_s: float, lag=No
         b = order[i : i + max(1, int(np.count_nonzero(cost <= budget)))]
         i += b.size
         L = int(lengths[b].max())
+        n_steps = lengths[b] - 2
         if two_filter:
-            n_steps = lengths[b] - 2
-            yield (
-                b,
-                L,
-                smooth_two_filter(Z[2:L, b], model, x0[b], P0[b], mu0, period_s, n_steps, lag),
-            )
-            continue
-        imm = IMM(**model, x0=x0[b], P0=P0[b], mu0=mu0, gate_probability=1.0)
-        rec = forward_record(imm, Z[2:L, b])
-        yield b, L, smooth(*rec, model, n_steps=lengths[b] - 2, lag=lag)
+            sm = smooth_two_filter(Z[2:L, b], model, x0[b], P0[b], mu0, period_s, n_steps, lag)
+        else:
+            imm = IMM(**model, x0=x0[b], P0=P0[b], mu0=mu0, gate_probability=1.0)
+            sm = smooth(*forward_record(imm, Z[2:L, b]), model, n_steps=n_steps, lag=lag)
+        yield b, L, sm
 
 
 def _right_flags(p_left, p_right, X):
