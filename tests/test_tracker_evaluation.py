@@ -181,13 +181,12 @@ def test_no_long_segment_is_a_user_error():
         evaluation.evaluate([], presets.get("realistic"), 50.0, 1.0)
 
 
-def test_evaluate_tracker_command_on_a_recorded_file(tmp_path, capsys):
-    """The CLI end to end on a traffic-style CSV made here (needs the recorded readers)."""
+def recorded_csv(path):
+    """``path``: a traffic-style CSV of one flight of :data:`LEGS`, 5 s reports (needs the
+    recorded readers' pandas and pyproj; skips without them)."""
     pytest.importorskip("airspace_sim.recorded")
     pd = pytest.importorskip("pandas")
     pyproj = pytest.importorskip("pyproj")
-    from airspace_sim import cli
-
     t, X = flight(LEGS)
     rec = np.arange(0, t.size, 5)
     to_geo = pyproj.Transformer.from_crs(
@@ -201,7 +200,15 @@ def test_evaluate_tracker_command_on_a_recorded_file(tmp_path, capsys):
         "icao24": "abc123", "callsign": "TEST1", "latitude": lat, "longitude": lon,
         "altitude": 30000.0, "groundspeed": np.hypot(X[rec, 1], X[rec, 3]) / 0.514444,
         "track": track,
-    }).to_csv(tmp_path / "f.csv", index=False)  # fmt: skip
+    }).to_csv(path, index=False)  # fmt: skip
+    return path
+
+
+def test_evaluate_tracker_command_on_a_recorded_file(tmp_path, capsys):
+    """The CLI end to end on a traffic-style CSV made here (needs the recorded readers)."""
+    from airspace_sim import cli
+
+    recorded_csv(tmp_path / "f.csv")
     out = tmp_path / "r.json"
     assert cli.main(["evaluate-tracker", str(tmp_path / "f.csv"), "--json", str(out)]) == 0
     text = capsys.readouterr().out

@@ -47,6 +47,21 @@ def add_arguments(parser) -> None:
     parser.add_argument(
         "--json", metavar="PATH", default=None, help="also write the figures as JSON to PATH"
     )
+    parser.add_argument(
+        "--plot", metavar="DIR", default=None,
+        help="also draw PNGs into DIR: per preset and setting, the flags by time since the "
+        "turn began and the errors by phase, and the segments with the most turning seconds "
+        "(path, turn rate, flags, mode probabilities, errors)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--plot-flights", type=int, default=3, metavar="N",
+        help="with --plot: how many segments to draw (default 3; 0: the summaries only)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--plot-window", type=float, default=900.0, metavar="S",
+        help="with --plot: seconds of each segment to draw, those with the most turning "
+        "seconds (default 900)",
+    )  # fmt: skip
 
 
 def _paths(args) -> list:
@@ -76,10 +91,12 @@ def run(args) -> int:
     from airspace_sim.dynamics import presets
     from airspace_sim.errors import UserError
     from airspace_sim.recorded import read
-    from airspace_sim.tracking.evaluation import evaluate, resample
+    from airspace_sim.tracking.evaluation import evaluate_with_record, resample
+    from airspace_sim.tracking.evaluation_plot import most_turning
 
     if args.lag is not None and args.no_smoother:
         raise UserError("evaluate-tracker: --lag needs the smoothers; drop --no-smoother")
+    plots = _plot_folder(args)
     paths = _paths(args)
     flights = [f for p in paths for f in read(p)]
     chosen = [presets.get(name) for name in (args.preset or [presets.RECORDED_TRACKER])]
@@ -91,11 +108,16 @@ def run(args) -> int:
             if speed is not None and not np.all(np.isfinite(speed)):
                 speed = None  # no ground speed on some rows: keep the recorded times
             truths += resample(f.id, f.t_s, f.x_m, f.y_m, period, speed_mps=speed)
+        drawn = most_turning(truths, args.plot_flights) if plots else []
         for p in tqdm(chosen, desc=f"sigma={sigma:g} m, {period:g} s", leave=False):
-            ev = evaluate(truths, p, sigma, period, seed=args.seed, smoother=not args.no_smoother,
-                          smoother_lag_s=args.lag)  # fmt: skip
+            ev, record = evaluate_with_record(
+                truths, p, sigma, period, drawn, seed=args.seed, smoother=not args.no_smoother,
+                smoother_lag_s=args.lag,
+            )  # fmt: skip
             tqdm.write("\n".join(ev.lines()))
             results.append(ev)
+            if plots:
+                _draw(plots, ev, record, args.plot_window)
     if args.json:
         path = Path(args.json)
         try:
@@ -104,3 +126,41 @@ def run(args) -> int:
         except OSError as exc:
             raise UserError(f"--json {path}: cannot write ({exc.strerror})") from None
     return 0
+
+
+def _plot_folder(args):
+    """The folder of ``--plot`` (made), or None; its options checked."""
+    import math
+    from pathlib import Path
+
+    from airspace_sim.errors import UserError
+
+    if args.plot is None:
+        return None
+    if args.plot_flights < 0:
+        raise UserError(f"--plot-flights: must be >= 0, got {args.plot_flights}")
+    if not (math.isfinite(args.plot_window) and args.plot_window > 0):
+        raise UserError(f"--plot-window: must be a number of seconds > 0, got {args.plot_window}")
+    folder = Path(args.plot)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UserError(f"--plot {folder}: cannot make the folder ({exc.strerror})") from None
+    return folder
+
+
+def _draw(folder, ev, record, window_s: float) -> None:
+    """The summary PNG of ``ev`` and one PNG per segment of ``record`` (its ``window_s``
+    seconds with the most turning) into ``folder``."""
+    import re
+
+    from tqdm import tqdm
+
+    from airspace_sim.tracking.evaluation_plot import plot_flight, plot_summary
+
+    stem = f"{ev.preset}-{ev.period_s:g}s"
+    written = [plot_summary(ev, folder / f"{stem}-summary.png")]
+    for f, name in enumerate(record.names):
+        safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", name)
+        written.append(plot_flight(record, f, folder / f"{stem}-{f + 1}-{safe}.png", window_s))
+    tqdm.write(f"  plots: {', '.join(str(p) for p in written)}")

@@ -521,29 +521,79 @@ def _flags(p_left, p_right, X, ev) -> dict:
     )
 
 
-def _smoothed_figures(X, Z, ev, imm_run, cv_run, flags, period_s: float, lag=None) -> dict:
+def _smoothed_figures(
+    X, Z, ev, imm_run, cv_run, flags, period_s: float, lag=None, keep=()
+) -> tuple[dict, dict]:
     """The :class:`Evaluation` fields of the smoothed IMM and CV filter: ``imm_run`` and
     ``cv_run`` the (x0, P0, mu0, model) of each, ``flags`` the (known, turning_modes, rate) of
     :func:`turn_probabilities`, ``period_s`` the step (s), ``lag`` steps of fixed-lag (None:
-    fixed-interval). Errors are summed batch by batch, not kept per step."""
+    fixed-interval). Errors are summed batch by batch, not kept per step, except for the
+    flights ``keep`` (F',): second, the smoothed IMM's :class:`Record` fields of those."""
     T, F, _ = X.shape
     lengths = np.isfinite(Z[..., 0]).sum(axis=0)
     p_left, p_right = np.full((T, F), np.nan), np.full((T, F), np.nan)
+    keep = np.asarray(keep, dtype=int)
+    slot = np.full(F, -1)
+    slot[keep] = np.arange(keep.size)
+    kept_x = np.full((T, keep.size, models.N_STATE), np.nan)
+    kept_mu = np.full((T, keep.size, len(imm_run[2])), np.nan)
     sse = [0.0, 0.0]
     for i, run in enumerate((imm_run, cv_run)):
         for b, L, sm in _smoothed_runs(Z, *run, lengths, period_s, lag=lag):
-            e = (sm.x[..., [0, 2]] - X[2:L, b][..., [0, 2]])[ev[2:L, b]]
+            x = sm.x
+            e = (x[..., [0, 2]] - X[2:L, b][..., [0, 2]])[ev[2:L, b]]
             sse[i] += float(np.sum(e**2))
             if run is imm_run:
                 p_left[2:L, b], p_right[2:L, b] = turn_probabilities(
                     sm.mu, sm.x_modes, sm.P_modes, *flags
                 )
+                j = slot[b]
+                kept_x[2:L, j[j >= 0]] = x[:, j >= 0, : models.N_STATE]
+                kept_mu[2:L, j[j >= 0]] = sm.mu[:, j >= 0]
     n = max(int(ev.sum()), 1)
+    after = ~np.isfinite(X[:, keep, 0])  # a batch's record runs on past its shorter flights
+    kept_x[after], kept_mu[after] = np.nan, np.nan
+    kept_p = [np.where(after, np.nan, p[:, keep]) for p in (p_left, p_right)]
     return dict(
         pos_imm_smoothed=math.sqrt(sse[0] / n),
         pos_cv_smoothed=math.sqrt(sse[1] / n),
         **{f"smoothed_{k}": v for k, v in _flags(p_left, p_right, X, ev).items()},
-    )
+    ), dict(smoothed=kept_x, smoothed_mu=kept_mu, smoothed_p_left=kept_p[0],
+            smoothed_p_right=kept_p[1])  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Record:
+    """Every step of an evaluation for some of its flight segments (what
+    :mod:`airspace_sim.tracking.evaluation_plot` draws): T steps of ``period_s`` s from each
+    segment's first sample, F' segments, NaN after a segment's end (and for the first two
+    steps, the filters' start). States ``[x, vx, y, vy, Ω]`` (m, m/s, rad/s, CCW positive)."""
+
+    #: (F',) the segments' names (:attr:`Truth.name`)
+    names: tuple
+    period_s: float
+    #: (M,) the IMM's modes (:meth:`~airspace_sim.dynamics.presets.Preset.mode_names`)
+    mode_names: tuple
+    #: (T, F', 5) the truth
+    truth: np.ndarray
+    #: (T, F', 2) the measurements (m)
+    z: np.ndarray
+    #: (T, F') bool: the steps the statistics count (after the burn-in)
+    evaluated: np.ndarray
+    #: (T, F', 5) the IMM's combined estimate
+    imm: np.ndarray
+    #: (T, F', M) its mode probabilities
+    mu: np.ndarray
+    #: (T, F') its probability of a left / right turn (:func:`turn_probabilities`)
+    p_left: np.ndarray
+    p_right: np.ndarray
+    #: (T, F', 4) ``[x, vx, y, vy]`` of the best-tuned CV filter
+    cv: np.ndarray
+    #: the smoothed IMM, as ``imm``, ``mu``, ``p_left``, ``p_right``; None without smoother
+    smoothed: np.ndarray | None = None
+    smoothed_mu: np.ndarray | None = None
+    smoothed_p_left: np.ndarray | None = None
+    smoothed_p_right: np.ndarray | None = None
 
 
 def evaluate(
@@ -580,6 +630,26 @@ def evaluate(
     late. Not for models with the along-track acceleration
     (their smoothed fields stay None).
     """
+    return evaluate_with_record(
+        truths, preset, sigma_m, period_s, (), seed, cv_sigmas, gate_probability, smoother,
+        smoother_lag_s,
+    )[0]  # fmt: skip
+
+
+def evaluate_with_record(
+    truths,
+    preset,
+    sigma_m: float,
+    period_s: float,
+    flights,
+    seed: int = 0,
+    cv_sigmas=CV_SIGMA_GRID,
+    gate_probability: float = 1.0,
+    smoother: bool = True,
+    smoother_lag_s: float | None = None,
+) -> tuple[Evaluation, Record]:
+    """:func:`evaluate`, and the :class:`Record` of its every step for the truths at indices
+    ``flights`` (F',) int (the same run: the figures do not depend on what is recorded)."""
     from airspace_sim.tracking import IMM
 
     if not truths:
@@ -592,6 +662,10 @@ def evaluate(
     x0, P0 = _initial_state(Z, period_s, R, p.n_state)
     mu0 = p.mu0()
     ev = _evaluated(X, period_s)
+    keep = np.asarray(flights, dtype=int).reshape(-1)
+    if keep.size and (keep.min() < 0 or keep.max() >= F):
+        raise UserError(f"evaluate: flights to record must be in 0..{F - 1}, got {keep.tolist()}")
+    kept_mu = np.full((T, keep.size, len(mu0)), np.nan)
 
     imm = IMM(**p.imm_arguments(), x0=x0, P0=P0, mu0=mu0, gate_probability=gate_probability)
     turning_modes = np.asarray(p.turning_modes(), dtype=bool)
@@ -605,6 +679,7 @@ def evaluate(
     for k in range(2, T):
         imm.step(Z[k])
         est[k] = imm.x[:, : models.N_STATE]
+        kept_mu[k] = imm.mu[keep]
         p_left[k], p_right[k] = turn_probabilities(
             imm.mu, imm.x_modes, imm.P_modes, known, turning_modes, flag_rate
         )
@@ -633,7 +708,7 @@ def evaluate(
         grid[float(s)] = _rmse((e - X[..., :4])[ev][:, [0, 2]])
     best = min(grid, key=grid.get)
     cv = cv_est[best]
-    smoothed = {}
+    smoothed, kept_smoothed = {}, {}
     if smoother and not p.along_track().any():
         if smoother_lag_s is not None and not (
             math.isfinite(smoother_lag_s) and smoother_lag_s >= 0
@@ -643,7 +718,9 @@ def evaluate(
         flags = (known, turning_modes, flag_rate)
         cv_run = (x0[:, :5], P0[:, :5, :5], [1.0], cv_model(best))
         imm_run = (x0, P0, mu0, p.imm_arguments())
-        smoothed = _smoothed_figures(X, Z, ev, imm_run, cv_run, flags, period_s, lag)
+        smoothed, kept_smoothed = _smoothed_figures(
+            X, Z, ev, imm_run, cv_run, flags, period_s, lag, keep
+        )
         smoothed["smoother_lag_s"] = None if lag is None else lag * period_s
 
     omega = np.degrees(X[..., 4])
@@ -667,6 +744,17 @@ def evaluate(
             b = ev & (t_s >= lo) & ((t_s < hi) | math.isinf(hi))  # NaN: the other phase
             rmse = [_rmse(e[b][:, [0, 2]]) for e in (e_imm, e_cv)]
             phases.append((phase, lo, hi, float(b.sum() / max(ev.sum(), 1)), *rmse))
+    after = ~np.isfinite(X[:, keep, 0])  # the filters predict on past a flight's end
+
+    def kept(a):
+        return np.where(after.reshape(after.shape + (1,) * (a.ndim - 2)), np.nan, a)
+
+    record = Record(
+        names=tuple(truths[f].name for f in keep), period_s=period_s,
+        mode_names=p.mode_names(), truth=X[:, keep], z=Z[:, keep], evaluated=ev[:, keep],
+        imm=kept(est[:, keep]), mu=kept(kept_mu), p_left=kept(p_left[:, keep]),
+        p_right=kept(p_right[:, keep]), cv=kept(cv[:, keep]), **kept_smoothed,
+    )  # fmt: skip
     return Evaluation(
         sigma_m=sigma_m,
         period_s=period_s,
@@ -692,4 +780,4 @@ def evaluate(
         onset=onset,
         phases=phases,
         **smoothed,
-    )
+    ), record
