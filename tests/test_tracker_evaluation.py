@@ -353,10 +353,10 @@ def test_phases_partition_the_seconds_and_their_errors():
 
 def test_tuning_and_floor_scripts_run_on_flights_made_here(tmp_path, monkeypatch, capsys):
     """docs/benchmarks/tune_tracker.py (with a 4-mode candidate), tracker_floor.py,
-    turn_flags_fixed_lag.py and causal_turn_detector.py on four traffic-style JSON files
-    written here: the split, the candidate with another number of modes, the floors (told
-    more, never worse than the CV filter), the flags with a delay, the causal detector (its
-    fits' derivatives exact on a quadratic path)."""
+    turn_flags_fixed_lag.py, causal_turn_detector.py and turn_flag_misses.py on four
+    traffic-style JSON files written here: the split, the candidate with another number of
+    modes, the floors (told more, never worse than the CV filter), the flags with a delay,
+    the causal detector (its fits' derivatives exact on a quadratic path), the misses."""
     pytest.importorskip("airspace_sim.recorded")
     pd = pytest.importorskip("pandas")
     pyproj = pytest.importorskip("pyproj")
@@ -440,6 +440,19 @@ def test_tuning_and_floor_scripts_run_on_flights_made_here(tmp_path, monkeypatch
     assert [ln.split(",")[0].strip() for ln in rows] == ["window 16 s", "window 32 s"]
     flagged = [ln.split(": ")[-1] for ln in rows if "none" not in ln]
     assert flagged and all(float(f.split("/")[1].rstrip("%")) <= 2.0 for f in flagged)
+
+    # where the running IMM misses turns: shares of the turning steps add up to 1
+    sys.modules.pop("turn_flag_misses", None)
+    import turn_flag_misses
+
+    w = np.radians(np.r_[0.0, 0, 0, 1.2, 1.2, 1.2, 1.2])[:, None]  # a step in the rate
+    np.testing.assert_array_equal(turn_flag_misses.rate_changed(w, 1.0, 2.0)[:, 0],
+                                  [0, 0, 0, 1, 1, 0, 0])  # fmt: skip
+    turn_flag_misses.main([str(tmp_path), "--split", "all", "--period", "4"])
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("all 4s imm-ct: turning flagged")
+    shares = [float(ln.split(": ")[1].split("%")[0]) for ln in out[1:]]
+    assert len(shares) >= 3 and sum(shares) == pytest.approx(100.0, abs=0.5)
 
 
 def test_tune_tracker_splits_a_collection_file_by_flight(tmp_path, monkeypatch):
