@@ -277,6 +277,33 @@ def test_a_start_far_from_the_measurements_warns_once():
         imm.step(z)  # once only
 
 
+def test_the_start_check_resumes_for_trackers_appended_later():
+    """Once every tracker has accepted a measurement the check stops; a tracker appended
+    after that, started far from its measurements, still gets the warning, as does one
+    in an IMM pickled before the check could stop (no such flag in its state)."""
+    import pickle
+
+    p = presets.get("realistic")
+    imm = IMM.from_preset(p, np.zeros((1, 5)), np.eye(5) * 1e4)
+    for _ in range(3):
+        imm.step(np.zeros((1, 2)))
+    imm.append(np.zeros((1, 5)), np.eye(5) * 1e4, p.mu0())
+    z = np.array([[0.0, 0.0], [50e3, 20e3]])
+    with pytest.warns(UserWarning, match=r"1 tracker\(s\) \(first: row 1\)"):
+        for _ in range(6):
+            imm.step(z)
+
+    old = IMM.from_preset(p, np.zeros((1, 5)), np.eye(5) * 1e4)
+    state = old.__getstate__()
+    del state["_starting"]
+    old = pickle.loads(pickle.dumps(old))
+    old.__dict__.clear()
+    old.__dict__.update(state)
+    with pytest.warns(UserWarning, match="two_point_initialisation"):
+        for _ in range(6):
+            old.step(np.array([[50e3, 20e3]]))
+
+
 def test_a_preset_s_tracker_model_is_separate_from_its_traffic():
     """``Preset.tracker``: the world's tracker and IMM.from_preset run the tracker model (at
     the preset's dt and σ), the traffic (truth generator, matched imm_arguments) the

@@ -140,6 +140,9 @@ class IMM:
     the slot storage's buffers). Copy what you keep across steps.
     """
 
+    # the default for IMMs pickled before this flag existed (checkpoints): check once more
+    _starting = True
+
     def __init__(
         self,
         transitions,
@@ -182,6 +185,7 @@ class IMM:
         # per tracker: measurements gated since it started, while it has accepted none
         self._gated_from_start = np.zeros(self.B, dtype=np.int64)
         self._warned = False
+        self._starting = True  # some tracker has accepted no measurement yet
 
     @classmethod
     def from_preset(cls, preset, x0, P0, mu0=None, **kwargs) -> IMM:
@@ -300,10 +304,16 @@ class IMM:
 
     def _check_start(self, z) -> None:
         """Warn (once) when trackers have rejected every measurement since they started:
-        their x0 / P0 are far from the measurements and they will never pick the target up."""
+        their x0 / P0 are far from the measurements and they will never pick the target up.
+        Once every tracker has accepted one, or the warning was given, it returns at once
+        until :meth:`append`: its array work would otherwise weigh on every small batch's
+        step."""
+        if not self._starting:
+            return
         have = np.all(np.isfinite(z), axis=1)
         g = self._gated_from_start
         g[:] = np.where(have & (g >= 0), np.where(self.gated, g + 1, -1), g)
+        self._starting = bool(np.any(g >= 0))
         if not self._warned and np.any(g >= GATED_START_WARNING):
             import warnings
 
@@ -316,6 +326,7 @@ class IMM:
                 "airspace_sim.tracking.two_point_initialisation",
                 stacklevel=3,
             )
+        self._starting = self._starting and not self._warned
 
     def append(self, x0, P0, mu0) -> np.ndarray:
         """Add trackers at the end of the batch; return their row indices (k,) int.
@@ -332,6 +343,7 @@ class IMM:
         self._gated_from_start = np.concatenate(
             [self._gated_from_start, np.zeros(slots.size, dtype=np.int64)]
         )
+        self._starting = not self._warned and (self._starting or slots.size > 0)
         self._cache.clear()
         return np.arange(B, B + slots.size)
 
