@@ -68,6 +68,48 @@ def test_retime_removes_report_time_jitter():
     assert np.sqrt(np.mean(err[5:-5] ** 2)) < 0.3  # from 0.87 s RMS jitter
 
 
+def test_track_residual_sees_a_glitch_not_a_turn():
+    """Across the track from the quadratic through the neighbours: a 3 °/s turn at 240 m/s
+    with 10 s between reports leaves 55 m while steady (its fourth-order term) and
+    130 m where it begins and ends at once (no roll-in); a position put 1 km to the side
+    has its 1 km back (its neighbours' path does not include it)."""
+    t, X = flight([(200, 0.0), (120, 3.0), (200, 0.0)], speed=240.0)
+    rec = np.arange(0, t.size, 10)
+    x, y = X[rec, 0].copy(), X[rec, 2].copy()
+    r = evaluation.track_residual(t[rec], x, y)
+    assert np.isnan(r[[0, 1, -2, -1]]).all() and np.nanmax(r) < 140.0
+    steady = (t[rec] > 230) & (t[rec] < 290)
+    np.testing.assert_allclose(r[steady], 240.0 * math.radians(3.0) ** 3 / 24 * 4e4, rtol=0.05)
+    i = 30  # mid-turn
+    heading = math.atan2(X[rec[i], 3], X[rec[i], 1])
+    x[i] -= 1000.0 * math.sin(heading)
+    y[i] += 1000.0 * math.cos(heading)
+    r = evaluation.track_residual(t[rec], x, y)
+    assert r[i] == pytest.approx(1000.0, abs=60.0)
+
+
+def test_despike_drops_the_glitches_and_nothing_else():
+    """Isolated positions 0.6–3 km to the side (one of them next-but-one to another) are
+    dropped; a clean flight, turns of 8 °/s at 70 m/s every 5 s included, keeps every
+    position; the truth made with the glitches dropped turns as the clean one."""
+    t, X = flight([(200, 0.0), (45, 8.0), (200, 0.0), (60, -3.0), (200, 0.0)], speed=70.0)
+    rec = np.arange(0, t.size, 5)
+    x, y = X[rec, 0].copy(), X[rec, 2].copy()
+    assert evaluation.despike(t[rec], x, y).tolist() == list(range(rec.size))
+    bad = [10, 12, 60, 100]
+    for i, d in zip(bad, (600.0, -3000.0, 1500.0, -800.0)):
+        heading = math.atan2(X[rec[i], 3], X[rec[i], 1])
+        x[i] -= d * math.sin(heading)
+        y[i] += d * math.cos(heading)
+    keep = evaluation.despike(t[rec], x, y)
+    assert sorted(set(range(rec.size)) - set(keep.tolist())) == bad
+    (clean,) = evaluation.resample("f", t[rec], X[rec, 0], X[rec, 2], 1.0)
+    (kept,) = evaluation.resample("f", t[rec], x, y, 1.0)
+    (raw,) = evaluation.resample("f", t[rec], x, y, 1.0, spike_m=None)
+    w = [np.degrees(tr.state[:, 4]) for tr in (clean, kept, raw)]
+    assert np.abs(w[1] - w[0]).max() < 0.5 and np.abs(w[2] - w[0]).max() > 3.0
+
+
 @pytest.mark.parametrize("name", ["dense-turns", "imm-ct"])
 def test_evaluate_flags_turns_and_nis_is_consistent(name):
     """Known-rate modes (dense-turns) and an estimated-rate mode (imm-ct: flagged by its
@@ -219,6 +261,12 @@ def test_evaluate_tracker_command_on_a_recorded_file(tmp_path, capsys):
     rows = json.loads(out.read_text())
     assert [r["period_s"] for r in rows] == [1.0, 4.0] and all(r["n_flights"] == 1 for r in rows)
     assert "after the fact" in text and all(r["smoother_lag_s"] is None for r in rows)
+    # no glitch in this file: keeping them changes nothing
+    kept = tmp_path / "k.json"
+    assert cli.main(["evaluate-tracker", str(tmp_path / "f.csv"), "--keep-glitches",
+                     "--json", str(kept)]) == 0  # fmt: skip
+    assert json.loads(kept.read_text()) == rows
+    capsys.readouterr()
     assert cli.main(["evaluate-tracker", str(tmp_path / "f.csv"), "--lag", "12"]) == 0
     assert "12 s late (fixed-lag smoothers)" in capsys.readouterr().out
     assert cli.main(["evaluate-tracker", str(tmp_path / "f.csv"), "--lag", "-1"]) != 0

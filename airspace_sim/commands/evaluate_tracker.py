@@ -15,6 +15,8 @@ SETTINGS = ((50.0, 1.0), (100.0, 4.0))
 
 
 def add_arguments(parser) -> None:
+    from airspace_sim.tracking.evaluation import SPIKE_M
+
     parser.add_argument(
         "files", nargs="*", metavar="FILE",
         help="recorded trajectories (any format airspace_sim.recorded.read takes)",
@@ -33,6 +35,11 @@ def add_arguments(parser) -> None:
     parser.add_argument(
         "--no-retime", action="store_true",
         help="do not re-time the recorded positions by the recorded ground speed",
+    )  # fmt: skip
+    parser.add_argument(
+        "--keep-glitches", action="store_true",
+        help=f"keep recorded positions lying over {SPIKE_M:g} m across the track from their "
+        "neighbours' path (dropped by default: recording glitches, not turns)",
     )  # fmt: skip
     parser.add_argument(
         "--no-smoother", action="store_true",
@@ -91,7 +98,7 @@ def run(args) -> int:
     from airspace_sim.dynamics import presets
     from airspace_sim.errors import UserError
     from airspace_sim.recorded import read
-    from airspace_sim.tracking.evaluation import evaluate_with_record, resample
+    from airspace_sim.tracking.evaluation import SPIKE_M, evaluate_with_record, resample
     from airspace_sim.tracking.evaluation_plot import most_turning
 
     if args.lag is not None and args.no_smoother:
@@ -107,7 +114,8 @@ def run(args) -> int:
             speed = None if args.no_retime else np.hypot(f.vx, f.vy)
             if speed is not None and not np.all(np.isfinite(speed)):
                 speed = None  # no ground speed on some rows: keep the recorded times
-            truths += resample(f.id, f.t_s, f.x_m, f.y_m, period, speed_mps=speed)
+            truths += resample(f.id, f.t_s, f.x_m, f.y_m, period, speed_mps=speed,
+                               spike_m=None if args.keep_glitches else SPIKE_M)  # fmt: skip
         drawn = most_turning(truths, args.plot_flights) if plots else []
         for p in tqdm(chosen, desc=f"sigma={sigma:g} m, {period:g} s", leave=False):
             ev, record = evaluate_with_record(
