@@ -110,6 +110,24 @@ def test_despike_drops_the_glitches_and_nothing_else():
     assert np.abs(w[1] - w[0]).max() < 0.5 and np.abs(w[2] - w[0]).max() > 3.0
 
 
+def test_a_last_report_off_the_track_does_not_bend_the_truth():
+    """The truth ends END_TRIM_S before the last report, so a last report 500 m to the side
+    (which despike cannot judge: it has no neighbours after it) leaves the truth as the
+    clean flight's, straight; so does the first report, once past the burn-in."""
+    t, X = flight([(600, 0.0)], speed=230.0)
+    rec = np.arange(0, t.size, 10)
+    y = X[rec, 2].copy()
+    y[[0, -1]] += 500.0
+    (clean,) = evaluation.resample("f", t[rec], X[rec, 0], X[rec, 2], 1.0)
+    (off,) = evaluation.resample("f", t[rec], X[rec, 0], y, 1.0)
+    assert (
+        t[rec][-1] - evaluation.END_TRIM_S - 3.0 < off.t_s[-1] <= t[rec][-1] - evaluation.END_TRIM_S
+    )
+    scored = off.t_s >= evaluation.BURN_IN_S
+    np.testing.assert_allclose(off.state[scored], clean.state[scored], atol=1e-6)
+    assert np.abs(np.degrees(off.state[scored, 4])).max() < 1e-6
+
+
 @pytest.mark.parametrize("name", ["dense-turns", "imm-ct"])
 def test_evaluate_flags_turns_and_nis_is_consistent(name):
     """Known-rate modes (dense-turns) and an estimated-rate mode (imm-ct: flagged by its

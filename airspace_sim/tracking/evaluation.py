@@ -71,6 +71,8 @@ RATE_FLAG_DEG_S = 0.5
 MAX_GAP_S = 30.0
 #: Window (s) of the cubic Savitzky–Golay smoothing of recorded positions (:func:`resample`).
 SMOOTH_S = 31.0
+#: Seconds at the end of each recorded segment left out of its truth (:func:`resample`).
+END_TRIM_S = SMOOTH_S
 #: Seconds of each track left out of the statistics while the filters settle.
 BURN_IN_S = 60.0
 #: A turn begins when |ω| reaches this (deg/s) with a sign it keeps (:func:`since_onset`).
@@ -103,7 +105,8 @@ def resample(
     """Truth segments of one recorded flight at period ``period_s`` (list of :class:`Truth`).
 
     t_s (K,) increasing recorded times; x_m, y_m (K,) east/north positions in metres. The
-    flight is split at gaps over :data:`MAX_GAP_S`; segments shorter than ``min_duration_s``
+    flight is split at gaps over :data:`MAX_GAP_S`; each segment's truth ends
+    :data:`END_TRIM_S` before its last report, and truths shorter than ``min_duration_s``
     are left out. Positions off the track by over ``spike_m`` are dropped (:func:`despike`;
     None: none is). With ``speed_mps`` (K,), the recorded ground speed, positions are then
     re-timed (:func:`retime`). Each segment is interpolated linearly to a 1 s grid and
@@ -114,7 +117,11 @@ def resample(
     (the traffic samples' 5 s positions advance by 280 m and 570 m alternately at constant
     speed), which an interpolating spline turns into accelerations of tens of m/s². Why not
     the recorded velocity: in the same samples the track angle disagrees with the
-    positions' bearing by ~100° for half of some flights.
+    positions' bearing by ~100° for half of some flights. Why the end is cut: a segment's
+    last report is often off the track (in the traffic samples' ``collections/switzerland``
+    the smoothed truth turned at over 1 °/s in the last half-minute of 264 segments, the
+    recorded track angle by a median of 0.1°), and the smoothing spreads it over the last
+    half-window; the first minute is left out of the statistics anyway (:data:`BURN_IN_S`).
     """
     from scipy.signal import savgol_filter
 
@@ -125,7 +132,7 @@ def resample(
     win = int(SMOOTH_S) | 1
     out = []
     for seg, (a, b) in enumerate(zip(np.r_[0, cuts], np.r_[cuts, t.size])):
-        if b - a < 4 or t[b - 1] - t[a] < max(min_duration_s, 2 * SMOOTH_S):
+        if b - a < 4 or t[b - 1] - t[a] - END_TRIM_S < max(min_duration_s, 2 * SMOOTH_S):
             continue
         ts = t[a:b]
         xy = [np.asarray(v, dtype=float)[a:b] for v in (x_m, y_m)]
@@ -144,7 +151,7 @@ def resample(
             cols.append([savgol_filter(f, win, 3, deriv=d, mode="interp") for d in (0, 1, 2)])
         (px, vx, ax), (py, vy, ay) = cols
         omega = (vx * ay - vy * ax) / np.maximum(vx**2 + vy**2, 1.0)
-        g = np.arange(fine[0], fine[-1], period_s)
+        g = np.arange(fine[0], fine[-1] - END_TRIM_S, period_s)
         state = np.stack([np.interp(g, fine, v) for v in (px, vx, py, vy, omega)], axis=1)
         out.append(Truth(f"{name}#{seg}", g, state))
     return out
