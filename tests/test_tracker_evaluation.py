@@ -419,10 +419,11 @@ def test_phases_partition_the_seconds_and_their_errors():
 
 def test_tuning_and_floor_scripts_run_on_flights_made_here(tmp_path, monkeypatch, capsys):
     """docs/benchmarks/tune_tracker.py (with a 4-mode candidate), tracker_floor.py,
-    turn_flags_fixed_lag.py, causal_turn_detector.py and turn_flag_misses.py on four
-    traffic-style JSON files written here: the split, the candidate with another number of
-    modes, the floors (told more, never worse than the CV filter), the flags with a delay,
-    the causal detector (its fits' derivatives exact on a quadratic path), the misses."""
+    turn_flags_fixed_lag.py, causal_turn_detector.py, recording_glitches.py and
+    turn_flag_misses.py on four traffic-style JSON files written here: the split, the
+    candidate with another number of modes, the floors (told more, never worse than the CV
+    filter), the flags with a delay, the causal detector (its fits' derivatives exact on a
+    quadratic path), no glitch in clean flights, the misses."""
     pytest.importorskip("airspace_sim.recorded")
     pd = pytest.importorskip("pandas")
     pyproj = pytest.importorskip("pyproj")
@@ -506,6 +507,16 @@ def test_tuning_and_floor_scripts_run_on_flights_made_here(tmp_path, monkeypatch
     assert [ln.split(",")[0].strip() for ln in rows] == ["window 16 s", "window 32 s"]
     flagged = [ln.split(": ")[-1] for ln in rows if "none" not in ln]
     assert flagged and all(float(f.split("/")[1].rstrip("%")) <= 2.0 for f in flagged)
+
+    # glitches: none in these flights; a residual peak is the largest within two places
+    sys.modules.pop("recording_glitches", None)
+    import recording_glitches
+
+    peaks = recording_glitches.residual_peaks(np.array([np.nan, 1.0, 5.0, 2.0, 0.0, 0.0, 3.0]))
+    assert peaks.tolist() == [5.0, 3.0]
+    recording_glitches.main([str(p) for p in sorted(tmp_path.glob("f*.json.gz"))])
+    out = capsys.readouterr().out.splitlines()
+    assert len(out) == 4 and all(", 0 dropped;" in ln for ln in out)
 
     # where the running IMM misses turns: shares of the turning steps add up to 1
     sys.modules.pop("turn_flag_misses", None)

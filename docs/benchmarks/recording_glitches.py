@@ -1,0 +1,101 @@
+"""Glitches in recorded positions, and the bends they put in the truth at segment ends.
+
+    python docs/benchmarks/recording_glitches.py FILE... [--min-m 100]
+
+FILE: recorded trajectories (the traffic 2.8.1 samples, never committed). Per file:
+
+- positions, and how many ``evaluation.despike`` drops (over ``evaluation.SPIKE_M`` across
+  the track from their neighbours' path);
+- the local peaks of ``evaluation.track_residual`` (the largest within two positions either
+  side) over ``--min-m``, counted by size;
+- segment ends: how many truths made *without* the end cut (``END_TRIM_S`` set to 0 here)
+  turn at ≥ 1 °/s in their last 30 s, and, for those, the median change of the recorded track
+  angle and of the truth's heading over the last 40 s (deg).
+
+docs/tracking.md, "Glitches and segment ends", quotes it.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from airspace_sim.recorded import read
+from airspace_sim.tracking import evaluation as E
+
+#: Edges (m) of the residual-peak counts.
+PEAK_BINS_M = (300.0, 500.0, 1000.0, 3000.0, np.inf)
+
+
+def segments(t):
+    """(start, stop) of the runs of ``t`` (K,) s between gaps over ``E.MAX_GAP_S``."""
+    cuts = np.flatnonzero(np.diff(t) > E.MAX_GAP_S) + 1
+    return list(zip(np.r_[0, cuts], np.r_[cuts, t.size]))
+
+
+def residual_peaks(r):
+    """The values of ``r`` (K,) that are the largest within two places either side."""
+    v = np.nan_to_num(r)
+    padded = np.pad(v, 2)
+    top = np.ones(v.size, dtype=bool)
+    for s in (-2, -1, 1, 2):
+        top &= v >= padded[2 + s : 2 + s + v.size]
+    return v[top & (v > 0)]
+
+
+def end_bends(flights):
+    """(count, median |recorded track change|, median |truth heading change|) over the
+    truths made without the end cut that turn at ≥ 1 °/s in their last 30 s."""
+    cut, E.END_TRIM_S = E.END_TRIM_S, 0.0
+    try:
+        rows = []
+        for f in flights:
+            speed = np.hypot(f.vx, f.vy)
+            for tr in E.resample(f.id, f.t_s, f.x_m, f.y_m, 1.0,
+                                 speed_mps=speed if np.all(np.isfinite(speed)) else None):  # fmt: skip
+                t, w = tr.t_s, np.degrees(tr.state[:, 4])
+                if not np.any(np.abs(w[t > t[-1] - 30.0]) >= 1.0):
+                    continue
+                sel = (f.t_s >= t[-1] - 40.0) & (f.t_s <= t[-1] + 1.0)
+                track = np.unwrap(np.arctan2(f.vy[sel], f.vx[sel]))
+                h = np.unwrap(np.arctan2(tr.state[:, 3], tr.state[:, 1]))[t >= t[-1] - 40.0]
+                if track.size > 1:
+                    rows.append((abs(track[-1] - track[0]), abs(h[-1] - h[0])))
+    finally:
+        E.END_TRIM_S = cut
+    if not rows:
+        return 0, float("nan"), float("nan")
+    a = np.degrees(np.array(rows))
+    return len(rows), float(np.median(a[:, 0])), float(np.median(a[:, 1]))
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("files", nargs="+")
+    ap.add_argument("--min-m", type=float, default=100.0)
+    a = ap.parse_args(argv)
+    for path in a.files:
+        flights = list(read(path))
+        n = dropped = 0
+        peaks = []
+        for f in flights:
+            for lo, hi in segments(f.t_s):
+                t, x, y = f.t_s[lo:hi], f.x_m[lo:hi], f.y_m[lo:hi]
+                n += hi - lo
+                dropped += hi - lo - E.despike(t, x, y).size
+                peaks.append(residual_peaks(E.track_residual(t, x, y)))
+        p = np.concatenate(peaks) if peaks else np.zeros(0)
+        edges = (a.min_m,) + PEAK_BINS_M
+        counts = ", ".join(
+            f"{lo:g}-{hi:g} m: {int(np.count_nonzero((p >= lo) & (p < hi)))}"
+            for lo, hi in zip(edges[:-1], edges[1:])
+        )
+        bends, track, heading = end_bends(flights)
+        print(f"{path}: {len(flights)} flights, {n} positions, {dropped} dropped; residual "
+              f"peaks {counts}; ends turning >= 1 deg/s: {bends} (recorded track change "
+              f"median {track:.1f} deg, truth heading {heading:.1f} deg)")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
