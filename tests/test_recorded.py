@@ -209,6 +209,25 @@ def test_velocity_from_positions_repairs_a_rotated_track(tmp_path):
     np.testing.assert_allclose(good[0].speed, 450 * KNOT_MS, rtol=2e-3)
 
 
+def test_a_glitch_is_dropped_and_counted(tmp_path):
+    """One position moved 1.5 km across a straight track (its reported track unchanged) is
+    dropped and counted; ``glitch_m=None`` keeps it; a bad ``glitch_m`` is one line."""
+    df = _geodesic_flight(n=30)
+    lon, lat, _ = GEOD.fwd(df.longitude[12], df.latitude[12], (df.track[12] + 90.0) % 360, 1500.0)
+    df.loc[12, ["longitude", "latitude"]] = [lon, lat]
+    df.to_csv(tmp_path / "g.csv", index=False)
+    fl = read(tmp_path / "g.csv")
+    assert fl.dropped["glitch"] == 1 and len(fl[0]) == 29
+    kept = read(tmp_path / "g.csv", glitch_m=None)
+    assert "glitch" not in kept.dropped and len(kept[0]) == 30
+    assert fl[0].t_s.tolist() == np.delete(kept[0].t_s, 12).tolist()
+    clean = _geodesic_flight(n=30)
+    clean.to_csv(tmp_path / "c.csv", index=False)
+    assert "glitch" not in read(tmp_path / "c.csv").dropped
+    with pytest.raises(UserError, match="glitch_m must be a distance > 0 m or None, got -1"):
+        read(tmp_path / "c.csv", glitch_m=-1)
+
+
 @pytest.mark.parametrize(
     "mutate, message",
     [
@@ -277,6 +296,7 @@ def test_real_switzerland_collection():
     s = fl.summary()
     assert s["flights"] > 1000 and s["median_spacing_s"] == 10.0
     assert s["track_vs_course_deg"] < 1.0
+    assert 50 < fl.dropped["glitch"] < 500  # 136 of its 138 858 positions
 
 
 def test_a_missing_real_extra_is_one_line(monkeypatch):

@@ -7,6 +7,7 @@ closed-form geometry (one LoS pair in the crossing), the ids the files hold.
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 
@@ -67,6 +68,36 @@ def test_scenario_mixes_recorded_and_simulated_aircraft(tmp_path):
     (tmp_path / "bad2.toml").write_text('name = "b"\n[recorded]\nfile = "nope.csv"\n')
     with pytest.raises(UserError, match=r"recorded\.file: no such file"):
         World(load(tmp_path / "bad2.toml"))
+
+
+def test_glitches_are_dropped_unless_the_scenario_keeps_them(tmp_path, capsys):
+    """A recorded position 1.5 km to the side of a straight track is not flown: the flight
+    as the world reads it has one sample fewer, unless ``keep_glitches = true`` (or
+    ``replay --keep-glitches``)."""
+    from airspace_sim.commands import replay
+    from airspace_sim.recorded.scenario import load_flights
+    from airspace_sim.scenarios import load
+
+    a, b = _crossing()
+    y = a.y_m.copy()
+    y[10] += 1500.0
+    a = type(a)(a.id, a.icao24, a.callsign, a.t_s, a.x_m, y, a.vx, a.vy, a.turn_rate,
+                a.altitude_m)  # fmt: skip
+    _write_csv(tmp_path / "f.csv", [a, b])
+    lengths = {}
+    for keep in ("false", "true"):
+        (tmp_path / "g.toml").write_text(
+            f'name = "g"\nduration = 100\n[recorded]\nfile = "f.csv"\nkeep_glitches = {keep}\n'
+            'velocity = "positions"\n'
+        )
+        flights = load_flights(load(tmp_path / "g.toml").recorded, str(tmp_path / "g.toml"))
+        lengths[keep] = sorted(len(f) for f in flights)
+    assert lengths == {"false": [30, 31], "true": [31, 31]}
+    parser = argparse.ArgumentParser()
+    replay.add_arguments(parser)
+    for flag, want in (([], False), (["--keep-glitches"], True)):
+        sc = replay.build_scenario(parser.parse_args([str(tmp_path / "f.csv"), *flag]))
+        assert sc.recorded.keep_glitches is want
 
 
 def _cli(capsys, *args):

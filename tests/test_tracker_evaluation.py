@@ -13,6 +13,7 @@ import pytest
 
 from airspace_sim.dynamics import presets
 from airspace_sim.geometry import coordinated_turn_positions
+from airspace_sim.recorded import glitches
 from airspace_sim.tracking import evaluation
 
 
@@ -76,7 +77,7 @@ def test_track_residual_sees_a_glitch_not_a_turn():
     t, X = flight([(200, 0.0), (120, 3.0), (200, 0.0)], speed=240.0)
     rec = np.arange(0, t.size, 10)
     x, y = X[rec, 0].copy(), X[rec, 2].copy()
-    r = evaluation.track_residual(t[rec], x, y)
+    r = glitches.track_residual(t[rec], x, y)
     assert np.isnan(r[[0, 1, -2, -1]]).all() and np.nanmax(r) < 140.0
     steady = (t[rec] > 230) & (t[rec] < 290)
     np.testing.assert_allclose(r[steady], 240.0 * math.radians(3.0) ** 3 / 24 * 4e4, rtol=0.05)
@@ -84,35 +85,39 @@ def test_track_residual_sees_a_glitch_not_a_turn():
     heading = math.atan2(X[rec[i], 3], X[rec[i], 1])
     x[i] -= 1000.0 * math.sin(heading)
     y[i] += 1000.0 * math.cos(heading)
-    r = evaluation.track_residual(t[rec], x, y)
+    r = glitches.track_residual(t[rec], x, y)
     assert r[i] == pytest.approx(1000.0, abs=60.0)
 
 
 def test_despike_drops_the_glitches_and_nothing_else():
     """Isolated positions 0.6–3 km to the side (one of them next-but-one to another) are
     dropped; a clean flight, turns of 8 °/s at 70 m/s every 5 s included, keeps every
-    position; the truth made with the glitches dropped turns as the clean one."""
+    position; the truth made with the glitches dropped turns as the clean one, the one
+    made with them does not."""
     t, X = flight([(200, 0.0), (45, 8.0), (200, 0.0), (60, -3.0), (200, 0.0)], speed=70.0)
     rec = np.arange(0, t.size, 5)
     x, y = X[rec, 0].copy(), X[rec, 2].copy()
-    assert evaluation.despike(t[rec], x, y).tolist() == list(range(rec.size))
+    assert glitches.despike(t[rec], x, y).tolist() == list(range(rec.size))
     bad = [10, 12, 60, 100]
     for i, d in zip(bad, (600.0, -3000.0, 1500.0, -800.0)):
         heading = math.atan2(X[rec[i], 3], X[rec[i], 1])
         x[i] -= d * math.sin(heading)
         y[i] += d * math.cos(heading)
-    keep = evaluation.despike(t[rec], x, y)
+    keep = glitches.despike(t[rec], x, y)
     assert sorted(set(range(rec.size)) - set(keep.tolist())) == bad
     (clean,) = evaluation.resample("f", t[rec], X[rec, 0], X[rec, 2], 1.0)
-    (kept,) = evaluation.resample("f", t[rec], x, y, 1.0)
-    (raw,) = evaluation.resample("f", t[rec], x, y, 1.0, spike_m=None)
+    (kept,) = evaluation.resample("f", t[rec][keep], x[keep], y[keep], 1.0)
+    (raw,) = evaluation.resample("f", t[rec], x, y, 1.0)
     w = [np.degrees(tr.state[:, 4]) for tr in (clean, kept, raw)]
     assert np.abs(w[1] - w[0]).max() < 0.5 and np.abs(w[2] - w[0]).max() > 3.0
+    # runs apart (a silence over RUN_GAP_S) are judged apart: their ends are not judged
+    gap = np.where(np.arange(rec.size) < 60, 0.0, 2 * glitches.RUN_GAP_S)
+    assert sorted(set(range(rec.size)) - set(glitches.despike(t[rec] + gap, x, y))) == [10, 12, 100]
 
 
 def test_a_last_report_off_the_track_does_not_bend_the_truth():
     """The truth ends END_TRIM_S before the last report, so a last report 500 m to the side
-    (which despike cannot judge: it has no neighbours after it) leaves the truth as the
+    (which despike cannot judge: no neighbours after it) leaves the truth as the
     clean flight's, straight; so does the first report, once past the burn-in."""
     t, X = flight([(600, 0.0)], speed=230.0)
     rec = np.arange(0, t.size, 10)

@@ -15,7 +15,7 @@ SETTINGS = ((50.0, 1.0), (100.0, 4.0))
 
 
 def add_arguments(parser) -> None:
-    from airspace_sim.tracking.evaluation import SPIKE_M
+    from airspace_sim.recorded.glitches import SPIKE_M
 
     parser.add_argument(
         "files", nargs="*", metavar="FILE",
@@ -98,14 +98,16 @@ def run(args) -> int:
     from airspace_sim.dynamics import presets
     from airspace_sim.errors import UserError
     from airspace_sim.recorded import read
-    from airspace_sim.tracking.evaluation import SPIKE_M, evaluate_with_record, resample
+    from airspace_sim.recorded.glitches import SPIKE_M
+    from airspace_sim.tracking.evaluation import evaluate_with_record, resample
     from airspace_sim.tracking.evaluation_plot import most_turning
 
     if args.lag is not None and args.no_smoother:
         raise UserError("evaluate-tracker: --lag needs the smoothers; drop --no-smoother")
     plots = _plot_folder(args)
     paths = _paths(args)
-    flights = [f for p in paths for f in read(p)]
+    glitch_m = None if args.keep_glitches else SPIKE_M
+    flights = [f for p in paths for f in read(p, glitch_m=glitch_m)]
     chosen = [presets.get(name) for name in (args.preset or [presets.RECORDED_TRACKER])]
     results = []
     for sigma, period in SETTINGS:
@@ -114,8 +116,7 @@ def run(args) -> int:
             speed = None if args.no_retime else np.hypot(f.vx, f.vy)
             if speed is not None and not np.all(np.isfinite(speed)):
                 speed = None  # no ground speed on some rows: keep the recorded times
-            truths += resample(f.id, f.t_s, f.x_m, f.y_m, period, speed_mps=speed,
-                               spike_m=None if args.keep_glitches else SPIKE_M)  # fmt: skip
+            truths += resample(f.id, f.t_s, f.x_m, f.y_m, period, speed_mps=speed)
         drawn = most_turning(truths, args.plot_flights) if plots else []
         for p in tqdm(chosen, desc=f"sigma={sigma:g} m, {period:g} s", leave=False):
             ev, record = evaluate_with_record(

@@ -86,6 +86,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "differenced positions (for data whose track disagrees with its positions)",
     )
     parser.add_argument(
+        "--keep-glitches",
+        action="store_true",
+        help="keep recorded positions lying over 500 m across the track from their "
+        "neighbours' path (dropped by default: recording glitches)",
+    )
+    parser.add_argument(
         "--vertical-ft",
         type=positive_float,
         default=1000.0,
@@ -134,6 +140,8 @@ def build_scenario(args):
         recorded["start_s"] = args.start
     if args.velocity is not None:
         recorded["velocity"] = args.velocity
+    if args.keep_glitches:
+        recorded["keep_glitches"] = True
     data["recorded"] = recorded
     if args.r_safe is not None:
         data.setdefault("separation", {})["r_safe"] = args.r_safe

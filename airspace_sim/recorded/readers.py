@@ -23,7 +23,9 @@ dropped (a row whose position time, or without that column whose latitude and lo
 equal the previous row's of the same aircraft: OpenSky repeats the last position every 10 s
 until a new one comes); repeated timestamps keep their first row. Each aircraft's rows are
 cut into flights at silences longer than ``split_gap_s`` (``flight_id`` if the file has
-one); shorter gaps stay in the flight as gaps (:attr:`Flight.max_gap_s`).
+one); shorter gaps stay in the flight as gaps (:attr:`Flight.max_gap_s`). Last, glitches are
+dropped: single positions over ``glitch_m`` (500 m) across the track from the path of their
+neighbours (:mod:`airspace_sim.recorded.glitches`).
 
 A value that is not a number, a time or a boolean, or a position off the globe, is a
 :class:`~airspace_sim.errors.UserError` naming the file, the data row (1-based; for CSV
@@ -50,6 +52,7 @@ from airspace_sim.recorded.flights import (
     derivative,
     turn_rates,
 )
+from airspace_sim.recorded.glitches import SPIKE_M, despike
 
 #: s: a longer silence starts a new flight of the same aircraft (``traffic``'s own default
 #: for ``Traffic.assign_id``/``Flight.split``)
@@ -269,6 +272,7 @@ def read(
     max_gap_s: float = MAX_GAP_S,
     min_samples: int = 2,
     velocity: str = "reported",
+    glitch_m: float | None = SPIKE_M,
 ) -> Flights:
     """Read one file or a list of files of recorded trajectories into :class:`Flights`.
 
@@ -283,9 +287,14 @@ def read(
     velocity : ``"reported"`` (from the ground speed and track columns) or ``"positions"``
         (central differences of the projected positions, :func:`derivative`), for data
         whose track disagrees with its positions (``Flights.summary()["track_vs_course_deg"]``).
+    glitch_m : m, a position this far across the track from the path of its neighbours is a
+        glitch and is dropped (:func:`airspace_sim.recorded.glitches.despike`; counted in
+        ``dropped["glitch"]``); None keeps every position.
     """
     if velocity not in VELOCITY_SOURCES:
         raise UserError(f"recorded: velocity must be one of {VELOCITY_SOURCES}, got {velocity!r}")
+    if glitch_m is not None and not (math.isfinite(glitch_m) and glitch_m > 0):
+        raise UserError(f"recorded: glitch_m must be a distance > 0 m or None, got {glitch_m!r}")
     if isinstance(paths, (str, Path)):
         paths = [paths]
     paths = [Path(p) for p in paths]
@@ -328,7 +337,11 @@ def read(
             k = counts[base]
             counts[base] += 1
             fid = base if c["by_id"] and k == 0 else f"{base}-{k}"
-            sl = slice(a, b)
+            sl = np.arange(a, b)
+            if glitch_m is not None:
+                sl = sl[despike(t[a:b], x[a:b], y[a:b], glitch_m)]
+                if sl.size < b - a:
+                    dropped["glitch"] += int(b - a - sl.size)
             fvx, fvy = vx[sl], vy[sl]
             if velocity == "positions":
                 fvx = derivative(t[sl], x[sl], max_gap_s)

@@ -46,15 +46,20 @@ def resolve_file(file: str, source: str) -> Path:
 
 
 @functools.lru_cache(maxsize=8)
-def _read_cached(path: str, mtime: float, centre, max_gap_s: float, velocity: str) -> Flights:
+def _read_cached(
+    path: str, mtime: float, centre, max_gap_s: float, velocity: str, keep_glitches: bool
+) -> Flights:
+    from airspace_sim.recorded.glitches import SPIKE_M
     from airspace_sim.recorded.readers import read
 
-    return read(path, centre=centre, max_gap_s=max_gap_s, velocity=velocity)
+    glitch_m = None if keep_glitches else SPIKE_M
+    return read(path, centre=centre, max_gap_s=max_gap_s, velocity=velocity, glitch_m=glitch_m)
 
 
 def load_flights(spec, source: str = "<memory>") -> Flights:
     """The :class:`Flights` of a :class:`~airspace_sim.scenarios.schema.RecordedSpec`
-    (read once per file, frame, gap and velocity source: Flights are immutable), with its
+    (read once per file, frame, gap, velocity source and glitch rule: Flights are
+    immutable), with its
     ``flights``, altitude and ``max_gap_s`` selections applied. ``spec`` is one the scenario
     loader validated (:data:`airspace_sim.scenarios.loader.RANGES` and
     :func:`~airspace_sim.scenarios.loader.check_scenario` hold its rules); only what needs
@@ -64,8 +69,9 @@ def load_flights(spec, source: str = "<memory>") -> Flights:
     if spec.centre_lat_deg is not None:
         centre = (float(spec.centre_lat_deg), float(spec.centre_lon_deg))
     flights = _read_cached(
-        str(path.resolve()), path.stat().st_mtime, centre, spec.max_gap_s, spec.velocity
-    )
+        str(path.resolve()), path.stat().st_mtime, centre, spec.max_gap_s, spec.velocity,
+        bool(spec.keep_glitches),
+    )  # fmt: skip
     if spec.flights:
         wanted = set(spec.flights)
         flights = flights.select(lambda f: bool({f.id, f.icao24, f.callsign} & wanted))

@@ -199,6 +199,9 @@ class RecordedSpec:
     #: velocities from the "reported" ground speed and track, or differenced "positions"
     #: (for data whose track disagrees with its positions)
     velocity: str = "reported"
+    #: keep single positions lying over 500 m across the track from their neighbours' path
+    #: (recording glitches, dropped by default: airspace_sim.recorded.glitches)
+    keep_glitches: bool = False
     #: recorded aircraft track the others and run the detection (alerts); they never fly
     #: the advice
     track: bool = True

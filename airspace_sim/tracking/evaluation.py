@@ -62,9 +62,6 @@ TURNING_DEG_S = 1.0
 STRAIGHT_DEG_S = 0.25
 #: Window (s) of the slow drift removed when re-timing positions (:func:`retime`).
 RETIME_DRIFT_S = 120.0
-#: A recorded position farther than this (m) across the track from the path its neighbours
-#: fly is a glitch, dropped before the truth is made (:func:`despike`).
-SPIKE_M = 500.0
 #: The second turn flag: the IMM's combined turn-rate estimate at least this (deg/s).
 RATE_FLAG_DEG_S = 0.5
 #: A recorded gap longer than this (s) splits a flight: the truth is not interpolated across.
@@ -100,16 +97,16 @@ def resample(
     period_s: float,
     speed_mps=None,
     min_duration_s: float = 300.0,
-    spike_m: float | None = SPIKE_M,
 ):
     """Truth segments of one recorded flight at period ``period_s`` (list of :class:`Truth`).
 
     t_s (K,) increasing recorded times; x_m, y_m (K,) east/north positions in metres. The
     flight is split at gaps over :data:`MAX_GAP_S`; each segment's truth ends
     :data:`END_TRIM_S` before its last report, and truths shorter than ``min_duration_s``
-    are left out. Positions off the track by over ``spike_m`` are dropped (:func:`despike`;
-    None: none is). With ``speed_mps`` (K,), the recorded ground speed, positions are then
-    re-timed (:func:`retime`). Each segment is interpolated linearly to a 1 s grid and
+    are left out. With ``speed_mps`` (K,), the recorded ground speed, positions are first
+    re-timed (:func:`retime`); glitches should be gone before
+    (:func:`airspace_sim.recorded.glitches.despike`, which :func:`airspace_sim.recorded.read`
+    applies). Each segment is interpolated linearly to a 1 s grid and
     smoothed by a cubic Savitzky–Golay filter over :data:`SMOOTH_S` seconds, whose
     derivatives give the velocity and the turn rate ``ω = (vx ay − vy ax) / |v|²``.
 
@@ -136,13 +133,8 @@ def resample(
             continue
         ts = t[a:b]
         xy = [np.asarray(v, dtype=float)[a:b] for v in (x_m, y_m)]
-        speed = None if speed_mps is None else np.asarray(speed_mps, dtype=float)[a:b]
-        if spike_m is not None:
-            keep = despike(ts, *xy, spike_m)
-            ts, xy = ts[keep], [v[keep] for v in xy]
-            speed = None if speed is None else speed[keep]
-        if speed is not None:
-            ts, keep = retime(ts, *xy, speed)
+        if speed_mps is not None:
+            ts, keep = retime(ts, *xy, np.asarray(speed_mps, dtype=float)[a:b])
             xy = [v[keep] for v in xy]
         fine = np.arange(ts[0], ts[-1], 1.0)
         cols = []
@@ -155,56 +147,6 @@ def resample(
         state = np.stack([np.interp(g, fine, v) for v in (px, vx, py, vy, omega)], axis=1)
         out.append(Truth(f"{name}#{seg}", g, state))
     return out
-
-
-def track_residual(t, x, y):
-    """How far each recorded position is across the track from the path its neighbours
-    fly: (K,) m, NaN for the first and last two. t (K,) s increasing, x, y (K,) m.
-
-    The least-squares quadratic in time through the two positions before and the two after
-    gives the position expected at ``t_i`` and the direction of flight there; the residual
-    is the distance across that direction. A turn at a steady rate leaves only its
-    fourth-order term (4 v ω³ Δt⁴ / 24: 55 m for 3 °/s at 240 m/s, Δt = 10 s between
-    reports), one begun at once 130 m; a timing error moves a position along the track, not across it."""
-    t, x, y = (np.asarray(v, dtype=float) for v in (t, x, y))
-    out = np.full(t.size, np.nan)
-    if t.size < 5:
-        return out
-    i = np.arange(2, t.size - 2)
-    nodes = i[:, None] + np.array([-2, -1, 1, 2])
-    tau = t[nodes] - t[i, None]
-    V = np.stack([np.ones_like(tau), tau, tau**2], axis=-1)  # (K-4, 4, 3)
-    fit = np.linalg.pinv(V)  # (K-4, 3, 4): least-squares coefficients of the quadratic
-    cx = np.einsum("kpj,kj->kp", fit, x[nodes])
-    cy = np.einsum("kpj,kj->kp", fit, y[nodes])
-    rx, ry = x[i] - cx[:, 0], y[i] - cy[:, 0]
-    speed = np.maximum(np.hypot(cx[:, 1], cy[:, 1]), 1e-9)
-    out[i] = np.abs(rx * cy[:, 1] - ry * cx[:, 1]) / speed
-    return out
-
-
-def despike(t, x, y, spike_m: float = SPIKE_M):
-    """Indices (K',) of the recorded positions to keep: all but the glitches, positions
-    over ``spike_m`` m across the track from the path of their neighbours
-    (:func:`track_residual`). A glitch also pulls its neighbours' paths, so only the
-    largest residual within two positions either side is dropped, and the check is repeated
-    until no glitch is left.
-
-    Why: in the traffic samples' ``collections/switzerland`` about one 10 s position in a
-    thousand lies 0.5–3 km to the side of a straight track (the recorded track angle does
-    not move); smoothed into the truth, each one becomes a jog of ±2–4 °/s over half a
-    minute that no aircraft flew (docs/tracking.md, "Glitches in the recordings")."""
-    keep = np.arange(np.asarray(t).size)
-    while True:
-        r = track_residual(*(np.asarray(v, dtype=float)[keep] for v in (t, x, y)))
-        bad = np.nan_to_num(r) > spike_m
-        if not bad.any():
-            return keep
-        padded = np.pad(np.nan_to_num(r), 2)
-        top = np.ones(r.size, dtype=bool)
-        for s in (-2, -1, 1, 2):
-            top &= np.nan_to_num(r) >= padded[2 + s : 2 + s + r.size]
-        keep = keep[~(bad & top)]
 
 
 def retime(t, x, y, speed):

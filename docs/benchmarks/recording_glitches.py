@@ -4,13 +4,14 @@
 
 FILE: recorded trajectories (the traffic 2.8.1 samples, never committed). Per file:
 
-- positions, and how many ``evaluation.despike`` drops (over ``evaluation.SPIKE_M`` across
-  the track from their neighbours' path);
-- the local peaks of ``evaluation.track_residual`` (the largest within two positions either
+- positions as recorded, and how many ``glitches.despike`` drops (over ``glitches.SPIKE_M``
+  across the track from their neighbours' path; ``recorded.read`` drops them by default);
+- the local peaks of ``glitches.track_residual`` (the largest within two positions either
   side) over ``--min-m``, counted by size;
-- segment ends: how many truths made *without* the end cut (``END_TRIM_S`` set to 0 here)
-  turn at ≥ 1 °/s in their last 30 s, and, for those, the median change of the recorded track
-  angle and of the truth's heading over the last 40 s (deg).
+- segment ends, the glitches dropped: how many truths made *without* the end cut
+  (``evaluation.END_TRIM_S`` set to 0 here) turn at ≥ 1 °/s in their last 30 s, and, for
+  those, the median change of the recorded track angle and of the truth's heading over the
+  last 40 s (deg).
 
 docs/tracking.md, "Glitches and segment ends", quotes it.
 """
@@ -21,7 +22,7 @@ import argparse
 
 import numpy as np
 
-from airspace_sim.recorded import read
+from airspace_sim.recorded import glitches, read
 from airspace_sim.tracking import evaluation as E
 
 #: Edges (m) of the residual-peak counts.
@@ -29,19 +30,15 @@ PEAK_BINS_M = (300.0, 500.0, 1000.0, 3000.0, np.inf)
 
 
 def segments(t):
-    """(start, stop) of the runs of ``t`` (K,) s between gaps over ``E.MAX_GAP_S``."""
-    cuts = np.flatnonzero(np.diff(t) > E.MAX_GAP_S) + 1
+    """(start, stop) of the runs of ``t`` (K,) s between gaps over ``glitches.RUN_GAP_S``."""
+    cuts = np.flatnonzero(np.diff(t) > glitches.RUN_GAP_S) + 1
     return list(zip(np.r_[0, cuts], np.r_[cuts, t.size]))
 
 
 def residual_peaks(r):
     """The values of ``r`` (K,) that are the largest within two places either side."""
     v = np.nan_to_num(r)
-    padded = np.pad(v, 2)
-    top = np.ones(v.size, dtype=bool)
-    for s in (-2, -1, 1, 2):
-        top &= v >= padded[2 + s : 2 + s + v.size]
-    return v[top & (v > 0)]
+    return v[glitches.local_peaks(r) & (v > 0)]
 
 
 def end_bends(flights):
@@ -76,22 +73,22 @@ def main(argv=None) -> None:
     ap.add_argument("--min-m", type=float, default=100.0)
     a = ap.parse_args(argv)
     for path in a.files:
-        flights = list(read(path))
+        flights = list(read(path, glitch_m=None))
         n = dropped = 0
         peaks = []
         for f in flights:
             for lo, hi in segments(f.t_s):
                 t, x, y = f.t_s[lo:hi], f.x_m[lo:hi], f.y_m[lo:hi]
                 n += hi - lo
-                dropped += hi - lo - E.despike(t, x, y).size
-                peaks.append(residual_peaks(E.track_residual(t, x, y)))
+                dropped += hi - lo - glitches.despike(t, x, y).size
+                peaks.append(residual_peaks(glitches.track_residual(t, x, y)))
         p = np.concatenate(peaks) if peaks else np.zeros(0)
         edges = (a.min_m,) + PEAK_BINS_M
         counts = ", ".join(
             f"{lo:g}-{hi:g} m: {int(np.count_nonzero((p >= lo) & (p < hi)))}"
             for lo, hi in zip(edges[:-1], edges[1:])
         )
-        bends, track, heading = end_bends(flights)
+        bends, track, heading = end_bends(read(path))
         print(f"{path}: {len(flights)} flights, {n} positions, {dropped} dropped; residual "
               f"peaks {counts}; ends turning >= 1 deg/s: {bends} (recorded track change "
               f"median {track:.1f} deg, truth heading {heading:.1f} deg)")  # fmt: skip
