@@ -53,6 +53,8 @@ def _non_negative_float(text: str) -> float:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from airspace_sim.recorded.glitches import SPIKE_M
+
     parser.add_argument("file", help="trajectory file, or traffic:NAME (a traffic wheel sample)")
     parser.add_argument(
         "--scenario",
@@ -88,7 +90,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--keep-glitches",
         action="store_true",
-        help="keep recorded positions lying over 500 m across the track from their "
+        help=f"keep recorded positions lying over {SPIKE_M:g} m across the track from their "
         "neighbours' path (dropped by default: recording glitches)",
     )
     parser.add_argument(

@@ -90,13 +90,7 @@ class Truth:
 
 
 def resample(
-    name: str,
-    t_s,
-    x_m,
-    y_m,
-    period_s: float,
-    speed_mps=None,
-    min_duration_s: float = 300.0,
+    name: str, t_s, x_m, y_m, period_s: float, speed_mps=None, min_duration_s: float = 300.0
 ):
     """Truth segments of one recorded flight at period ``period_s`` (list of :class:`Truth`).
 
