@@ -115,10 +115,34 @@ def test_despike_drops_the_glitches_and_nothing_else():
     assert sorted(set(range(rec.size)) - set(glitches.despike(t[rec] + gap, x, y))) == [10, 12, 100]
 
 
+def test_positions_interpolated_between_reports_are_left_out_of_the_truth():
+    """Reports every 10 s through a 3 °/s turn at 70 m/s, and positions every 5 s put on the
+    straight line between them (as in the traffic calibration samples): ``reported`` finds
+    the reports (and keeps a long straight stretch whole), and the truth turns at a steady
+    3 °/s mid-turn, as the reports alone give it."""
+    t, X = flight([(300, 0.0), (180, 3.0), (300, 0.0)], speed=70.0)
+    reports = np.arange(0, t.size, 10)
+    grid = np.arange(0, t[reports[-1]] + 1, 5.0)
+    x, y = (np.interp(grid, t[reports], X[reports, c]) for c in (0, 2))
+    kept = glitches.reported(grid, x, y)
+    straight = grid[kept] < 280.0  # the first straight leg: one run over 30 s, kept whole
+    assert np.all(np.diff(grid[kept][straight]) == 5.0)
+    in_turn = (grid[kept] > 320.0) & (grid[kept] < 460.0)
+    assert np.all(np.isin(grid[kept][in_turn], t[reports]))  # only reports there
+    (tr,) = evaluation.resample("f", grid, x, y, 1.0)
+    (rep,) = evaluation.resample("f", t[reports], X[reports, 0], X[reports, 2], 1.0)
+    mid = (tr.t_s > 350) & (tr.t_s < 430)
+    np.testing.assert_allclose(np.degrees(tr.state[mid, 4]), 3.0, atol=0.15)
+    same = mid[: rep.t_s.size]
+    np.testing.assert_allclose(tr.state[mid][:, [0, 2]], rep.state[same][:, [0, 2]], atol=0.1)
+    np.testing.assert_allclose(tr.state[mid, 4], rep.state[same, 4], atol=math.radians(0.01))
+    assert glitches.reported([0.0, 1, 2], [0.0, 1, 2], [0.0, 0, 0]).tolist() == [0, 2]
+
+
 def test_a_last_report_off_the_track_does_not_bend_the_truth():
     """The truth ends END_TRIM_S before the last report, so a last report 500 m to the side
     (which despike cannot judge: no neighbours after it) leaves the truth as the
-    clean flight's, straight; so does the first report, once past the burn-in."""
+    clean flight's, straight, to two metres; so does the first report, once past the burn-in."""
     t, X = flight([(600, 0.0)], speed=230.0)
     rec = np.arange(0, t.size, 10)
     y = X[rec, 2].copy()
@@ -129,8 +153,11 @@ def test_a_last_report_off_the_track_does_not_bend_the_truth():
         t[rec][-1] - evaluation.END_TRIM_S - 3.0 < off.t_s[-1] <= t[rec][-1] - evaluation.END_TRIM_S
     )
     scored = off.t_s >= evaluation.BURN_IN_S
-    np.testing.assert_allclose(off.state[scored], clean.state[scored], atol=1e-6)
-    assert np.abs(np.degrees(off.state[scored, 4])).max() < 1e-6
+    # the spline through the reports carries a ripple of the off reports, shrinking by ~4 a
+    # report: of 500 m, a metre or two where the truth ends and none in between
+    np.testing.assert_allclose(off.state[scored][:, [0, 2]], clean.state[scored][:, [0, 2]],
+                               atol=2.0)  # fmt: skip
+    assert np.abs(np.degrees(off.state[scored, 4])).max() < 0.05  # a turn is 1 deg/s
 
 
 @pytest.mark.parametrize("name", ["dense-turns", "imm-ct"])

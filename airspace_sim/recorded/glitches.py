@@ -1,4 +1,4 @@
-"""Glitches in recorded positions: single reports lying far to the side of the track.
+"""Positions that are not reports: glitches far to the side of the track, and interpolations.
 
 In the traffic samples' ``collections/switzerland`` about one 10 s position in a thousand lies
 0.5–3 km to the side of a straight track while the recorded track angle does not move, and
@@ -6,7 +6,9 @@ the next position is back on it. Flown as recorded, such a report is a jump of k
 back; smoothed into a tracker's truth, a jog of ±2–4 °/s over half a minute that no aircraft
 flew (docs/tracking.md, "Glitches and segment ends"). :func:`despike` finds them by
 :func:`track_residual`; :func:`airspace_sim.recorded.read` drops them unless told to keep
-them. Plain numpy: no extra needed.
+them. Some files also hold positions interpolated on a straight line between reports:
+:func:`reported` tells them apart (for a tracker's truth, which should rest on the reports).
+Plain numpy: no extra needed.
 """
 
 from __future__ import annotations
@@ -78,3 +80,39 @@ def despike(t, x, y, spike_m: float = SPIKE_M):
             keep = keep[~bad]
         kept.append(keep)
     return np.concatenate(kept) if kept else np.zeros(0, dtype=int)
+
+
+#: A position within this (m) of the straight-line interpolation of its neighbours, at its
+#: time, is taken for an interpolated one (:func:`reported`).
+INTERPOLATED_M = 0.5
+
+
+def reported(t, x, y, max_gap_s: float = RUN_GAP_S) -> np.ndarray:
+    """Indices (K',) of the positions to build a path through: the reports, and the
+    interpolated positions of long straight stretches. t (K,) s increasing, x, y (K,) m.
+
+    A position is *interpolated* when it lies, to within :data:`INTERPOLATED_M`, where the
+    straight line between its neighbours puts it at its time. A run of such positions is
+    dropped when the positions either side of it are at most ``max_gap_s`` apart (a path
+    through the reports then rests on reports close in time), kept otherwise (a long
+    straight stretch stays as recorded). The first and last positions are kept.
+
+    Why: about half of the traffic samples' calibration positions (every 5 s) are such
+    interpolations between reports 10–25 s apart. In a turn they make a polygon: straight
+    chords at a constant step and corners, which a smoothed truth turns into rate spikes of
+    8 °/s and speed dips of 30 m/s while the aircraft's reported track turns steadily
+    (docs/tracking.md, "Reports and interpolated positions")."""
+    t, x, y = (np.asarray(v, dtype=float) for v in (t, x, y))
+    on_line = np.zeros(t.size, dtype=bool)
+    if t.size > 2:
+        w = (t[1:-1] - t[:-2]) / (t[2:] - t[:-2])
+        ex = x[:-2] + w * (x[2:] - x[:-2]) - x[1:-1]
+        ey = y[:-2] + w * (y[2:] - y[:-2]) - y[1:-1]
+        on_line[1:-1] = np.hypot(ex, ey) <= INTERPOLATED_M
+    keep = ~on_line
+    starts = np.flatnonzero(on_line & ~np.r_[False, on_line[:-1]])
+    ends = np.flatnonzero(on_line & ~np.r_[on_line[1:], False])
+    for a, b in zip(starts, ends):  # the run a..b, between the kept a - 1 and b + 1
+        if t[b + 1] - t[a - 1] > max_gap_s:
+            keep[a : b + 1] = True
+    return np.flatnonzero(keep)

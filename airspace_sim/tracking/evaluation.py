@@ -100,9 +100,11 @@ def resample(
     are left out. With ``speed_mps`` (K,), the recorded ground speed, positions are first
     re-timed (:func:`retime`); glitches should be gone before
     (:func:`airspace_sim.recorded.glitches.despike`, which :func:`airspace_sim.recorded.read`
-    applies). Each segment is interpolated linearly to a 1 s grid and
-    smoothed by a cubic Savitzky–Golay filter over :data:`SMOOTH_S` seconds, whose
-    derivatives give the velocity and the turn rate ``ω = (vx ay − vy ax) / |v|²``.
+    applies). Positions interpolated on a straight line between reports are left out
+    (:func:`airspace_sim.recorded.glitches.reported`), and the path through the rest is a cubic
+    spline on a 1 s grid, smoothed by a cubic Savitzky–Golay filter over :data:`SMOOTH_S`
+    seconds, whose derivatives give the velocity and the turn rate
+    ``ω = (vx ay − vy ax) / |v|²``.
 
     Why smooth: recorded positions are put on a time grid from irregular position reports
     (the traffic samples' 5 s positions advance by 280 m and 570 m alternately at constant
@@ -113,8 +115,13 @@ def resample(
     the smoothed truth turned at over 1 °/s in the last half-minute of 264 segments, the
     recorded track angle by a median of 0.1°), and the smoothing spreads it over the last
     half-window; the first minute is left out of the statistics anyway (:data:`BURN_IN_S`).
+    Why a spline through the reports: a straight line between them (and the interpolated
+    positions on it) is a polygon in turns, chords and corners no aircraft flies.
     """
+    from scipy.interpolate import CubicSpline
     from scipy.signal import savgol_filter
+
+    from airspace_sim.recorded.glitches import reported
 
     t = np.asarray(t_s, dtype=float)
     if t.size > 1 and np.any(np.diff(t) <= 0):
@@ -125,15 +132,16 @@ def resample(
     for seg, (a, b) in enumerate(zip(np.r_[0, cuts], np.r_[cuts, t.size])):
         if b - a < 4 or t[b - 1] - t[a] - END_TRIM_S < max(min_duration_s, 2 * SMOOTH_S):
             continue
-        ts = t[a:b]
         xy = [np.asarray(v, dtype=float)[a:b] for v in (x_m, y_m)]
+        k = reported(t[a:b], *xy)
+        ts, xy = t[a:b][k], [v[k] for v in xy]
         if speed_mps is not None:
-            ts, keep = retime(ts, *xy, np.asarray(speed_mps, dtype=float)[a:b])
+            ts, keep = retime(ts, *xy, np.asarray(speed_mps, dtype=float)[a:b][k])
             xy = [v[keep] for v in xy]
         fine = np.arange(ts[0], ts[-1], 1.0)
         cols = []
         for v in xy:
-            f = np.interp(fine, ts, v)
+            f = CubicSpline(ts, v)(fine)
             cols.append([savgol_filter(f, win, 3, deriv=d, mode="interp") for d in (0, 1, 2)])
         (px, vx, ax), (py, vy, ay) = cols
         omega = (vx * ay - vy * ax) / np.maximum(vx**2 + vy**2, 1.0)
