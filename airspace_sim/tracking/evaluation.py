@@ -90,7 +90,14 @@ class Truth:
 
 
 def resample(
-    name: str, t_s, x_m, y_m, period_s: float, speed_mps=None, min_duration_s: float = 300.0
+    name: str,
+    t_s,
+    x_m,
+    y_m,
+    period_s: float,
+    speed_mps=None,
+    min_duration_s: float = 300.0,
+    through_reports: bool = True,
 ):
     """Truth segments of one recorded flight at period ``period_s`` (list of :class:`Truth`).
 
@@ -100,10 +107,12 @@ def resample(
     are left out. With ``speed_mps`` (K,), the recorded ground speed, positions are first
     re-timed (:func:`retime`); glitches should be gone before
     (:func:`airspace_sim.recorded.glitches.despike`, which :func:`airspace_sim.recorded.read`
-    applies). Positions interpolated on a straight line between reports are left out
-    (:func:`airspace_sim.recorded.glitches.reported`), and the path through the rest is a cubic
-    spline on a 1 s grid, smoothed by a cubic Savitzky–Golay filter over :data:`SMOOTH_S`
-    seconds, whose derivatives give the velocity and the turn rate
+    applies). The path is drawn on a 1 s grid by straight lines between the positions, except
+    where positions interpolated on a straight line between reports were left out
+    (:func:`airspace_sim.recorded.glitches.reported`): across those spans, by the cubic spline
+    through the positions kept (``through_reports=False``: straight lines through every
+    position, the truth before 2026-12-08). It is smoothed by a cubic Savitzky–Golay filter over
+    :data:`SMOOTH_S` seconds, whose derivatives give the velocity and the turn rate
     ``ω = (vx ay − vy ax) / |v|²``.
 
     Why smooth: recorded positions are put on a time grid from irregular position reports
@@ -115,8 +124,12 @@ def resample(
     the smoothed truth turned at over 1 °/s in the last half-minute of 264 segments, the
     recorded track angle by a median of 0.1°), and the smoothing spreads it over the last
     half-window; the first minute is left out of the statistics anyway (:data:`BURN_IN_S`).
-    Why a spline through the reports: a straight line between them (and the interpolated
-    positions on it) is a polygon in turns, chords and corners no aircraft flies.
+    Why a spline where interpolations were: a straight line between reports (and the
+    interpolated positions on it) is a polygon in turns, chords and corners no aircraft flies.
+    Why not everywhere: between reports 10 s apart (``collections/switzerland``) the spline
+    rings with what is left of their timing jitter; straight lines there agree with the
+    recorded track rate, the spline does not (docs/tracking.md, "Reports and interpolated
+    positions").
     """
     from scipy.interpolate import CubicSpline
     from scipy.signal import savgol_filter
@@ -133,15 +146,20 @@ def resample(
         if b - a < 4 or t[b - 1] - t[a] - END_TRIM_S < max(min_duration_s, 2 * SMOOTH_S):
             continue
         xy = [np.asarray(v, dtype=float)[a:b] for v in (x_m, y_m)]
-        k = reported(t[a:b], *xy)
+        k = reported(t[a:b], *xy) if through_reports else np.arange(b - a)
         ts, xy = t[a:b][k], [v[k] for v in xy]
+        filled = np.diff(k) > 1  # (K'-1,) the span to the next position lost interpolations
         if speed_mps is not None:
             ts, keep = retime(ts, *xy, np.asarray(speed_mps, dtype=float)[a:b][k])
             xy = [v[keep] for v in xy]
+            filled = np.r_[np.maximum.reduceat(np.r_[filled, False], keep)[:-1]]
         fine = np.arange(ts[0], ts[-1], 1.0)
+        curved = filled[np.clip(np.searchsorted(ts, fine, side="right") - 1, 0, ts.size - 2)]
         cols = []
         for v in xy:
-            f = CubicSpline(ts, v)(fine)
+            f = np.interp(fine, ts, v)
+            if curved.any():
+                f = np.where(curved, CubicSpline(ts, v)(fine), f)
             cols.append([savgol_filter(f, win, 3, deriv=d, mode="interp") for d in (0, 1, 2)])
         (px, vx, ax), (py, vy, ay) = cols
         omega = (vx * ay - vy * ax) / np.maximum(vx**2 + vy**2, 1.0)
