@@ -91,7 +91,8 @@ def track_rate_gaps(flights, through_reports: bool) -> np.ndarray:
             w = tr.state[:, 4]
             turning = (np.abs(np.degrees(w)) >= E.TURNING_DEG_S) & (tr.t_s >= tr.t_s[0] + 60.0)
             d.append(np.degrees(np.abs(w - rate))[turning])
-    return np.concatenate(d) if d else np.zeros(0)
+    d = np.concatenate(d) if d else np.zeros(0)
+    return d[np.isfinite(d)]  # no recorded track: not compared
 
 
 def agreement(d) -> str:
