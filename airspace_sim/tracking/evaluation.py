@@ -152,7 +152,7 @@ def resample(
         if speed_mps is not None:
             ts, keep = retime(ts, *xy, np.asarray(speed_mps, dtype=float)[a:b][k])
             xy = [v[keep] for v in xy]
-            filled = np.r_[np.maximum.reduceat(np.r_[filled, False], keep)[:-1]]
+            filled = np.maximum.reduceat(np.r_[filled, False], keep)[:-1]  # spans merged
         fine = np.arange(ts[0], ts[-1], 1.0)
         curved = filled[np.clip(np.searchsorted(ts, fine, side="right") - 1, 0, ts.size - 2)]
         cols = []
