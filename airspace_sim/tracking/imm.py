@@ -140,7 +140,8 @@ class IMM:
     the slot storage's buffers). Copy what you keep across steps.
     """
 
-    # the default for IMMs pickled before this flag existed (checkpoints): check once more
+    # some tracker has accepted no measurement yet (a class default, so IMMs pickled before
+    # this flag existed check once more)
     _starting = True
 
     def __init__(
@@ -185,7 +186,6 @@ class IMM:
         # per tracker: measurements gated since it started, while it has accepted none
         self._gated_from_start = np.zeros(self.B, dtype=np.int64)
         self._warned = False
-        self._starting = True  # some tracker has accepted no measurement yet
 
     @classmethod
     def from_preset(cls, preset, x0, P0, mu0=None, **kwargs) -> IMM:
@@ -313,7 +313,6 @@ class IMM:
         have = np.all(np.isfinite(z), axis=1)
         g = self._gated_from_start
         g[:] = np.where(have & (g >= 0), np.where(self.gated, g + 1, -1), g)
-        self._starting = bool(np.any(g >= 0))
         if not self._warned and np.any(g >= GATED_START_WARNING):
             import warnings
 
@@ -326,7 +325,7 @@ class IMM:
                 "airspace_sim.tracking.two_point_initialisation",
                 stacklevel=3,
             )
-        self._starting = self._starting and not self._warned
+        self._starting = not self._warned and bool(np.any(g >= 0))
 
     def append(self, x0, P0, mu0) -> np.ndarray:
         """Add trackers at the end of the batch; return their row indices (k,) int.
